@@ -1,0 +1,204 @@
+"""Context: the parameters (a validated RobotSpec) and the state of one simulated robot.
+
+Parameters are changed only through the context, which validates them by path and re-lowers the
+kernel arrays while keeping the state; so a bad value is refused with its name and never reaches
+the plant.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .dynamics.rigid_body import RigidBodyModel
+from .kernel import layout as L
+from .lowering import Lowered, lower
+from .model.spec import RobotSpec
+
+HISTORY_CAPACITY = 8192  # command events kept for the delay line (0.8 s at 10 kHz)
+
+
+class Context:
+    def __init__(self, plant, spec: RobotSpec | None = None, seed: int = 0):
+        self.plant = plant
+        self.spec: RobotSpec = (spec or plant.spec).copy()
+        self.lowered: Lowered = lower(self.spec)
+        n, na = self.spec.tree.n, len(self.spec.joints)
+        self.XQ = np.zeros((2, n))
+        self.XS = np.zeros((na, L.XS_N))
+        self.XG = np.zeros(L.XG_N)
+        self.HT = np.zeros(HISTORY_CAPACITY)
+        self.HU = np.zeros((HISTORY_CAPACITY, na))
+        self.rng = np.zeros(1, dtype=np.uint64)
+        self.faults: dict[tuple[str, str], dict] = {}
+        self.reset(seed)
+
+    # ---- arrays the kernel reads ---------------------------------------------------------------
+    @property
+    def AP(self) -> np.ndarray:
+        return self.lowered.AP
+
+    @property
+    def DP(self) -> np.ndarray:
+        return self.lowered.DP
+
+    @property
+    def GP(self) -> np.ndarray:
+        return self.lowered.GP
+
+    @property
+    def time(self) -> float:
+        return float(self.XG[L.XG_TIME])
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.XQ[0]
+
+    @property
+    def qd(self) -> np.ndarray:
+        return self.XQ[1]
+
+    def rigid_body(self) -> RigidBodyModel:
+        lw = self.lowered
+        return RigidBodyModel(self.spec.tree, lw.mass, lw.com, lw.inertia)
+
+    # ---- state ------------------------------------------------------------------------------
+    def reset(self, seed: int | None = None, q0: np.ndarray | None = None) -> None:
+        """Initial state: the spec's pose at rest, chambers pre-loaded to hold the arm still."""
+        lw = self.lowered
+        tree = self.spec.tree
+        q = lw.q0.copy() if q0 is None else np.asarray(q0, dtype=float).copy()
+        self.XQ[0] = q
+        self.XQ[1] = 0.0
+        self.XS[:] = 0.0
+        self.XG[:] = 0.0
+        self.HT[:] = 0.0
+        self.HU[:] = 0.0
+        if seed is not None:
+            # splitmix64 of the seed: any integer gives a well-mixed, non-zero xorshift state
+            z = (int(seed) + 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF
+            z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+            z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+            self.rng[0] = np.uint64((z ^ (z >> 31)) or 1)
+        GP, AP = lw.GP, lw.AP
+        self.XG[L.XG_P_S] = GP[L.GP_P_SUPPLY] * GP[L.GP_SUPPLY_SAG]
+        gravity = self.rigid_body().inverse_dynamics(q, np.zeros(tree.n), np.zeros(tree.n))
+        p_s, p_t = GP[L.GP_P_SUPPLY], GP[L.GP_P_TANK]
+        pm = 0.5 * (p_s + p_t)
+        for a, js in enumerate(self.spec.joints):
+            dof = int(AP[a, L.AP_DOF])
+            tau = gravity[dof]
+            if AP[a, L.AP_KIND] == 0.0:
+                c0, d1, d2 = AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2]
+                Ln = np.sqrt(c0 - 2 * (d1 * np.cos(q[dof]) + d2 * np.sin(q[dof])))
+                arm = (d1 * np.sin(q[dof]) - d2 * np.cos(q[dof])) / Ln
+                F = tau / arm
+                A_a, A_b = AP[a, L.AP_AREA_A], AP[a, L.AP_AREA_B]
+                lam = (F - pm * (A_a - A_b)) / (A_a ** 2 + A_b ** 2)
+                pa, pb = pm + lam * A_a, pm - lam * A_b
+            else:
+                dp = tau / AP[a, L.AP_AREA_A]
+                pa, pb = pm + 0.5 * dp, pm - 0.5 * dp
+            pa, pb = float(np.clip(pa, p_t, p_s)), float(np.clip(pb, p_t, p_s))
+            self.XS[a, L.XS_P_A] = self.XS[a, L.XS_PH_A] = pa
+            self.XS[a, L.XS_P_B] = self.XS[a, L.XS_PH_B] = pb
+            th = q[dof]
+            if AP[a, L.AP_E_COMPLIANCE] != 0.0:
+                th = q[dof] + tau / AP[a, L.AP_COMP_K]  # spring pre-loaded with the gravity torque
+            self.XS[a, L.XS_TH_A] = th
+            self.XS[a, L.XS_Y_BACK] = q[dof]
+            self.XS[a, L.XS_CURSOR] = -1.0
+            self.XS[a, L.XS_SENS_ANGLE] = q[dof]
+
+    # ---- parameters -------------------------------------------------------------------------
+    def _relower(self) -> None:
+        new = lower(self.spec)
+        for key, mode in self.faults.items():
+            _apply_fault(new, self.spec, key, mode)
+        self.lowered = new
+        # states of effects that were off are kept in step by the kernel; nothing to re-initialise
+
+    def set_parameter(self, path: str, value: Any) -> None:
+        old = self.spec.get(path)
+        self.spec.set(path, value)
+        try:
+            self._relower()
+        except Exception:
+            self.spec.set(path, old)
+            raise
+
+    def get_parameter(self, path: str) -> Any:
+        return self.spec.get(path)
+
+    def enable_effect(self, name: str, joint: str | None = None, **params):
+        backup = list(self.spec.effects)
+        inst = self.spec.enable_effect(name, joint, **params)
+        try:
+            self._relower()
+        except Exception:
+            self.spec.effects = backup
+            raise
+        return inst
+
+    def disable_effect(self, name: str, joint: str | None = None) -> bool:
+        changed = self.spec.disable_effect(name, joint)
+        if changed:
+            self._relower()
+        return changed
+
+    def apply_overrides(self, data: dict, where: str = "parameter file") -> None:
+        self.spec.apply_overrides(data, where)
+        self._relower()
+
+    # ---- faults (HIL fault injection; cleared individually) ----------------------------------------
+    def set_fault(self, joint: str | None, kind: str, **params) -> None:
+        key = (joint or "", kind)
+        mode = dict(params)
+        _apply_fault(self.lowered, self.spec, key, mode)  # raises on an unknown kind or joint
+        self.faults[key] = mode
+
+    def clear_fault(self, joint: str | None, kind: str) -> bool:
+        key = (joint or "", kind)
+        if key not in self.faults:
+            return False
+        del self.faults[key]
+        self._relower()
+        return True
+
+    def clear_faults(self) -> None:
+        self.faults.clear()
+        self._relower()
+
+
+FAULT_KINDS = ("sensor_stuck", "sensor_noisy", "sensor_offset", "spool_stuck", "leak", "hose_burst", "supply_sag")
+
+
+def _apply_fault(lw: Lowered, spec: RobotSpec, key: tuple[str, str], mode: dict) -> None:
+    joint, kind = key
+    AP, GP = lw.AP, lw.GP
+    if kind == "supply_sag":
+        GP[L.GP_SUPPLY_SAG] = float(mode.get("factor", 0.7))
+        return
+    a = spec.joint_names.index(joint)
+    if kind == "sensor_stuck":
+        AP[a, L.AP_F_SENS_MODE] = 1.0
+        AP[a, L.AP_F_SENS_VALUE] = float(mode["value"])
+    elif kind == "sensor_noisy":
+        AP[a, L.AP_F_SENS_MODE] = 2.0
+        AP[a, L.AP_F_SENS_NOISE] = float(mode.get("std", 0.05))
+    elif kind == "sensor_offset":
+        AP[a, L.AP_F_SENS_OFFSET] = float(mode.get("offset", 0.2))
+    elif kind == "spool_stuck":
+        AP[a, L.AP_F_SPOOL_STUCK] = 1.0
+        AP[a, L.AP_F_SPOOL_POS] = float(mode.get("position", 0.0))
+    elif kind == "leak":
+        c = float(mode.get("coefficient", 1e-11))
+        if mode.get("chamber", "a") in ("a", "both"):
+            AP[a, L.AP_F_LEAK_A] = c
+        if mode.get("chamber", "a") in ("b", "both"):
+            AP[a, L.AP_F_LEAK_B] = c
+    elif kind == "hose_burst":
+        AP[a, L.AP_F_BURST_KV] = float(mode.get("flow_coefficient", 5.0 * AP[a, L.AP_KV]))
+    else:
+        raise ValueError(f"unknown fault {kind!r}; faults: {', '.join(FAULT_KINDS)}")
