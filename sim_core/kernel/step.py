@@ -100,7 +100,7 @@ def delayed_command(a, t0, t1, HT, HU, XG, XS):
 def refresh_command_chain(AP, h, Acc, Bcc, expw):
     """Recompute the exact discretisation of every actuator's command chain for substep ``h``."""
     for a in range(AP.shape[0]):
-        if AP[a, AP_CMD_H] == h:
+        if abs(AP[a, AP_CMD_H] - h) <= 1e-9 * h:  # grids from arange differ in the last bits
             continue
         command_chain_matrix(AP[a, AP_SOL_TAU], AP[a, AP_SPOOL_WN], AP[a, AP_SPOOL_ZETA],
                              AP[a, AP_SPOOL_GAIN], AP[a, AP_LAG_TAU], Acc, Bcc)
