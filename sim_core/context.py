@@ -32,6 +32,7 @@ class Context:
         self.HU = np.zeros((HISTORY_CAPACITY, na))
         self.rng = np.zeros(1, dtype=np.uint64)
         self.faults: dict[tuple[str, str], dict] = {}
+        self.energy_ledger = False
         self.reset(seed)
 
     # ---- arrays the kernel reads ---------------------------------------------------------------
@@ -116,6 +117,7 @@ class Context:
         new = lower(self.spec)
         for key, mode in self.faults.items():
             _apply_fault(new, self.spec, key, mode)
+        new.GP[L.GP_ENERGY] = 1.0 if self.energy_ledger else 0.0
         self.lowered = new
         # states of effects that were off are kept in step by the kernel; nothing to re-initialise
 

@@ -106,9 +106,9 @@ def lower(spec: RobotSpec) -> Lowered:
         # a port relief passes the valve's rated flow 0.5 MPa above cracking
         AP[a, L.AP_RELIEF_K] = v["rated_flow"] / 5e5
         hose = c["hose"]
-        AP[a, L.AP_HOSE_VOL] = hose.volume
+        AP[a, L.AP_HOSE_VOL] = max(hose.volume, 1e-9)  # a zero-length hose still has a port volume
         AP[a, L.AP_HOSE_BETA] = hose["effective_bulk_modulus"]
-        AP[a, L.AP_HOSE_I] = hose.inertance(fluid["density"]) if hose["length"] > 0 else 1.0
+        AP[a, L.AP_HOSE_I] = hose.inertance(fluid["density"])
         AP[a, L.AP_HOSE_RLAM] = hose.laminar_resistance(fluid.dynamic_viscosity)
         AP[a, L.AP_HOSE_RTURB] = hose.turbulent_resistance(fluid["density"])
         AP[a, L.AP_HOSE_TURB] = 1.0 if hose["flow_regime"] == "turbulent" else 0.0
@@ -139,12 +139,25 @@ def lower(spec: RobotSpec) -> Lowered:
     rb = RigidBodyModel(tree, lw.mass, lw.com, lw.inertia)
     Jd = np.diag(rb.mass_matrix(q0)).copy()
     lw.joint_inertia[:] = Jd
+    # end stops: stiff enough that the actuator's full-pressure torque pushes at most
+    # end_stop_penetration into them, and never softer than end_stop_frequency on the link
     w = 2.0 * math.pi * integ["end_stop_frequency"]
+    tau_max = np.zeros(n)
+    for a, js in enumerate(spec.joints):
+        i = tree.index(js.dof)
+        if AP[a, L.AP_KIND] == 0.0:
+            qs = np.linspace(tree.lower[i], tree.upper[i], 50)
+            c0, d1, d2 = AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2]
+            arm = (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(c0 - 2 * (d1 * np.cos(qs) + d2 * np.sin(qs)))
+            tau_max[i] = supply["pressure"] * AP[a, L.AP_AREA_A] * arm.max()
+        else:
+            tau_max[i] = supply["pressure"] * AP[a, L.AP_AREA_A]
     for i in range(n):
+        k = max(Jd[i] * w * w, tau_max[i] / integ["end_stop_penetration"])
         DP[i, L.DP_LOWER] = tree.lower[i]
         DP[i, L.DP_UPPER] = tree.upper[i]
-        DP[i, L.DP_STOP_K] = Jd[i] * w * w
-        DP[i, L.DP_STOP_C] = 2.0 * integ["end_stop_damping_ratio"] * Jd[i] * w
+        DP[i, L.DP_STOP_K] = k
+        DP[i, L.DP_STOP_C] = 2.0 * integ["end_stop_damping_ratio"] * math.sqrt(k * Jd[i])
         DP[i, L.DP_DAMPING] = tree.damping[i]
         if not any(spec.tree.index(j.dof) == i for j in spec.joints):
             DP[i, L.DP_ACT] = -1

@@ -64,7 +64,7 @@ class Simulator:
             np.zeros((3, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
             np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, n)),
             np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n),
-            np.zeros((na, 4)), np.zeros((5, 5)), np.zeros((5, 2)), np.zeros((4, 7, 7)),
+            np.zeros(n), np.zeros(n), np.zeros((na, 4)), np.zeros((5, 5)), np.zeros((5, 2)), np.zeros((4, 7, 7)),
         )
         self._backup = (np.zeros((2, n)), np.zeros((na, L.XS_N)), np.zeros(L.XG_N))
         # one-step buffers for the real-time loop (no allocation per tick)

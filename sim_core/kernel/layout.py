@@ -164,7 +164,9 @@ XG_E_RELIEF_PUMP = 8   # pump-side relief and compensator spill
 XG_HIST_COUNT = 9      # number of command events written to the delay line
 XG_ERROR = 10          # kernel error code (0 ok): 1 NaN, 2 delay line overrun
 XG_STEPS = 11          # substeps taken
-XG_N = 12
+XG_E_ACT = 12          # work done by the actuators on the links (hydraulic -> mechanical)
+XG_E_COMPRESS = 13     # second-order term of the constant-beta continuity equation, int p^2/(2 beta) dV
+XG_N = 14
 
 # --- outputs per output step (Yact[k, a, :]) ---------------------------------------------------
 YA_U = 0               # commanded voltage (V)

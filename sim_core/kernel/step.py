@@ -150,10 +150,26 @@ def sample_sensors(AP, q, XS, rng, Ya_row, u_row):
         Ya_row[a, YA_ANGLE] = A * v + B
 
 
+@njit(inline="always", **_NJ)
+def _line_solve(h, u, qh, p, qv, dqv, ch, inert, r, cc, qdisp, lk, dlk):
+    """One implicit step of a T-type line: hose node ``u``, line flow ``qh``, chamber ``p``.
+
+        ch (u' - u)/h = qv + dqv (u' - u) - qh'
+        I (qh' - qh)/h = u' - p' - r qh'
+        cc (p' - p)/h = qh' - qdisp - lk - dlk (p' - p)
+    """
+    d1 = ch / h - dqv
+    d3 = cc / h + dlk
+    alpha = (ch / h * u + qv - dqv * u) / d1
+    gamma = (cc / h * p - qdisp - lk + dlk * p) / d3
+    qn = (inert / h * qh + alpha - gamma) / (inert / h + 1.0 / d1 + 1.0 / d3 + r)
+    return alpha - qn / d1, qn, gamma + qn / d3
+
+
 @njit(**_NJ)
 def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
     parent, R_tree, p_tree, axis, mass, com, inertia, gravity = tree
-    (Rw, ow, aw, cw, Iw, tmp33, w, dw, ao, F, N, mc, hc, Ic, M, Lf, bias, zero, rhs, Dlin, Ffr, Sfr, act) = ws
+    (Rw, ow, aw, cw, Iw, tmp33, w, dw, ao, F, N, mc, hc, Ic, M, Lf, bias, zero, rhs, Dlin, Ffr, Sfr, Tact, Kst, act) = ws
     n = parent.shape[0]
     na = AP.shape[0]
     q = XQ[0]
@@ -222,18 +238,22 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
         Dlin[i] = DP[i, DP_DAMPING]
         Ffr[i] = 0.0
         Sfr[i] = 0.0
+        Tact[i] = 0.0
         lo = DP[i, DP_LOWER]
         hi = DP[i, DP_UPPER]
+        Kst[i] = 0.0
         if q[i] > hi:  # end stop: spring-damper while penetrating, never pulling
             f = -DP[i, DP_STOP_K] * (q[i] - hi) - DP[i, DP_STOP_C] * qd[i]
             if f < 0.0:
                 rhs[i] += f
                 Dlin[i] += DP[i, DP_STOP_C]
+                Kst[i] = DP[i, DP_STOP_K]
         elif q[i] < lo:
             f = -DP[i, DP_STOP_K] * (q[i] - lo) - DP[i, DP_STOP_C] * qd[i]
             if f > 0.0:
                 rhs[i] += f
                 Dlin[i] += DP[i, DP_STOP_C]
+                Kst[i] = DP[i, DP_STOP_K]
     for a in range(na):
         dof = int(AP[a, AP_DOF])
         comp = AP[a, AP_E_COMPLIANCE] != 0.0
@@ -261,10 +281,12 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             rhs[dof] += link
             Dlin[dof] += c
             act[a, T_TAU] = link
+            Tact[dof] += link
         else:
             rhs[dof] += tau_h - visc * qd[dof]
             Dlin[dof] += visc
             act[a, T_TAU] = tau_h
+            Tact[dof] += tau_h
         if AP[a, AP_E_COULOMB] != 0.0:
             tf, slope = friction_torque(qd[dof], AP[a, AP_COUL_TORQUE], AP[a, AP_COUL_VEL])
             rhs[dof] += tf
@@ -273,7 +295,7 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
     for i in range(n):
         for j in range(n):
             Lf[i, j] = M[i, j]
-        Lf[i, i] += h * (Dlin[i] - Sfr[i])
+        Lf[i, i] += h * (Dlin[i] - Sfr[i]) + h * h * Kst[i]   # stop spring implicit: q_new = q + h qd_new
     ltl_factor(parent, Lf)
     ltl_solve(parent, Lf, rhs)  # rhs now holds qdd
     for i in range(n):
@@ -282,6 +304,7 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             # dissipated power of the linearly implicit terms, at the mean velocity of the step
             vavg = 0.5 * (qd[i] + qd_new)
             XG[XG_E_MECH] += h * (Dlin[i] * qd_new - Ffr[i] - Sfr[i] * (qd_new - qd[i])) * vavg
+            XG[XG_E_ACT] += h * Tact[i] * vavg
         qd[i] = qd_new
         q[i] += h * qd_new
 
@@ -410,12 +433,9 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             else:
                 ra = AP[a, AP_HOSE_RLAM]
                 rb = ra
-            qha_n = (qha + h / inert * (ua - pa)) / (1.0 + h * ra / inert)
-            qhb_n = (qhb + h / inert * (ub - pb)) / (1.0 + h * rb / inert)
-            ua_n = ua + h * (qva - qha_n) / (cha - h * dqva)
-            ub_n = ub + h * (qvb - qhb_n) / (chb - h * dqvb)
-            pa_n = pa + h * (qha_n - qdisp_a - lk_a) / (cca + h * dlk_a)
-            pb_n = pb + h * (qhb_n - qdisp_b - lk_b) / (ccb + h * dlk_b)
+            # node, line flow and chamber solved together (linearly implicit): stable for any hose
+            ua_n, qha_n, pa_n = _line_solve(h, ua, qha, pa, qva, dqva, cha, inert, ra, cca, qdisp_a, lk_a, dlk_a)
+            ub_n, qhb_n, pb_n = _line_solve(h, ub, qhb, pb, qvb, dqvb, chb, inert, rb, ccb, qdisp_b, lk_b, dlk_b)
             XS[a, XS_QH_A] = qha_n
             XS[a, XS_QH_B] = qhb_n
             if energy:
@@ -443,6 +463,8 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             dpb = pb_n - pb
             if ideal_pump:
                 XG[XG_E_SUPPLY] += h * p_s * (q_pa_e + q_pb_e)
+            if AP[a, AP_KIND] == 0.0:  # moving piston: d(V p^2 / 2 beta)/dt - p (Q - dV/dt) = p^2 dV/dt / (2 beta)
+                XG[XG_E_COMPRESS] += h * (pam * pam * qdisp_a / (2.0 * beta0 * fa) + pbm * pbm * qdisp_b / (2.0 * beta0 * fb_))
             XG[XG_E_TANK] += h * p_t * (q_at_e + q_bt_e)
             XG[XG_E_VALVE] += h * (q_pa_e * (p_s - uam) + q_at_e * (uam - p_t) + q_pb_e * (p_s - ubm) + q_bt_e * (ubm - p_t))
             lka_e = lk_a + dlk_a * dpa
@@ -539,8 +561,8 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, backup, Yt, Y
     cap = HT.shape[0]
     hmax = GP[GP_H_MAX]
     rb_every = int(GP[GP_RB_EVERY])
-    Acc, Bcc, expw = ws[23], ws[24], ws[25]
-    wsk = ws[:23]
+    Acc, Bcc, expw = ws[25], ws[26], ws[27]
+    wsk = ws[:25]
     for k in range(n_out):
         dt = dts[k]
         for i in range(XQ.shape[1]):

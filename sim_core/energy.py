@@ -1,0 +1,125 @@
+"""Energy bookkeeping: the kernel's ledger of hydraulic input and dissipation, and stored energy.
+
+Balance over any interval (all pressures gauge, so energies are relative to the tank datum):
+
+    E_supply + E_compress  =  E_tank + E_valve + E_hose + E_leak + E_mech + E_relief  +  dE_stored
+
+E_compress = int p^2/(2 beta) dV is the second-order defect of the constant-beta continuity equation
+(V/beta dp/dt = Q - dV/dt has no exact stored-energy function when the piston moves); booking it
+makes the balance a test of the integration, not of that known model property.
+
+E_stored = kinetic (1/2 qd' M qd) + gravitational + compressed oil (1/2 C p^2 per node) + hose
+fluid kinetic (1/2 I q^2) + end-stop and compliance springs + actuator-side kinetic energy.
+The kernel integrates the ledger only while ``Context.energy_ledger`` is on (it costs ~10 %).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .components.cylinder import cylinder_length
+from .effects.bulk_modulus import bulk_factor
+from .kernel import layout as L
+
+
+@dataclass
+class EnergyLedger:
+    supply: float
+    tank: float
+    valve: float
+    hose: float
+    leak: float
+    mech: float
+    relief: float
+    actuator_work: float = 0.0
+    compressibility: float = 0.0
+
+    @property
+    def dissipated(self) -> float:
+        return self.tank + self.valve + self.hose + self.leak + self.mech + self.relief
+
+
+def ledger(ctx) -> EnergyLedger:
+    X = ctx.XG
+    return EnergyLedger(X[L.XG_E_SUPPLY], X[L.XG_E_TANK], X[L.XG_E_VALVE], X[L.XG_E_HOSE],
+                        X[L.XG_E_LEAK], X[L.XG_E_MECH], X[L.XG_E_RELIEF_PUMP], X[L.XG_E_ACT],
+                        X[L.XG_E_COMPRESS])
+
+
+def stored_energy(ctx) -> dict[str, float]:
+    """Energy stored in the state of ``ctx`` (J), by kind."""
+    rb = ctx.rigid_body()
+    q, qd = ctx.XQ[0], ctx.XQ[1]
+    AP, DP, GP, XS = ctx.AP, ctx.DP, ctx.GP, ctx.XS
+    out = {"kinetic": rb.kinetic_energy(q, qd), "gravity": rb.potential_energy(q), "oil": 0.0,
+           "hose_flow": 0.0, "springs": 0.0}
+    for i in range(q.size):
+        if q[i] > DP[i, L.DP_UPPER]:
+            out["springs"] += 0.5 * DP[i, L.DP_STOP_K] * (q[i] - DP[i, L.DP_UPPER]) ** 2
+        elif q[i] < DP[i, L.DP_LOWER]:
+            out["springs"] += 0.5 * DP[i, L.DP_STOP_K] * (q[i] - DP[i, L.DP_LOWER]) ** 2
+    beta = GP[L.GP_BETA]
+
+    def bf(p):
+        return bulk_factor(p, GP[L.GP_E_BULK], GP[L.GP_BULK_SCALE], GP[L.GP_BULK_PAIR], GP[L.GP_P_ATM])
+
+    for a in range(AP.shape[0]):
+        dof = int(AP[a, L.AP_DOF])
+        comp = AP[a, L.AP_E_COMPLIANCE] != 0.0
+        th = XS[a, L.XS_TH_A] if comp else q[dof]
+        if AP[a, L.AP_KIND] == 0.0:
+            Ln, _ = cylinder_length(th, AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2])
+            x = Ln - AP[a, L.AP_LK_LMIN]
+            va = AP[a, L.AP_VDEAD_A] + AP[a, L.AP_AREA_A] * x
+            vb = AP[a, L.AP_VDEAD_B] + AP[a, L.AP_AREA_B] * (AP[a, L.AP_STROKE] - x)
+        else:
+            va, vb = AP[a, L.AP_VDEAD_A], AP[a, L.AP_VDEAD_B]
+        pa, pb = XS[a, L.XS_P_A], XS[a, L.XS_P_B]
+        vh, bh = AP[a, L.AP_HOSE_VOL], AP[a, L.AP_HOSE_BETA]
+        if AP[a, L.AP_E_LINE] != 0.0:
+            ua, ub = XS[a, L.XS_PH_A], XS[a, L.XS_PH_B]
+            out["oil"] += 0.5 * (va / (beta * bf(pa)) * pa ** 2 + vb / (beta * bf(pb)) * pb ** 2)
+            out["oil"] += 0.5 * vh / bh * (ua ** 2 / bf(ua) + ub ** 2 / bf(ub))
+            out["hose_flow"] += 0.5 * AP[a, L.AP_HOSE_I] * (XS[a, L.XS_QH_A] ** 2 + XS[a, L.XS_QH_B] ** 2)
+        else:
+            out["oil"] += 0.5 * ((va / beta + vh / bh) * pa ** 2 / bf(pa) + (vb / beta + vh / bh) * pb ** 2 / bf(pb))
+        if comp:
+            out["springs"] += 0.5 * AP[a, L.AP_COMP_K] * (XS[a, L.XS_TH_A] - q[dof]) ** 2
+            out["kinetic"] += 0.5 * AP[a, L.AP_COMP_JA] * XS[a, L.XS_OM_A] ** 2
+    if GP[L.GP_PUMP_QMAX] > 0.0:
+        out["oil"] += 0.5 * GP[L.GP_SUPPLY_C] * ctx.XG[L.XG_P_S] ** 2
+    out["total"] = float(sum(out.values()))
+    return out
+
+
+def balance(ctx, e0: dict, l0: EnergyLedger | None = None) -> dict[str, float]:
+    """Closure of the energy balance since the stored energy ``e0`` (and ledger ``l0``) were taken."""
+    l1 = ledger(ctx)
+    if l0 is None:
+        l0 = EnergyLedger(0, 0, 0, 0, 0, 0, 0)
+    e1 = stored_energy(ctx)
+    e_in = l1.supply - l0.supply + (l1.compressibility - l0.compressibility)
+    e_out = l1.dissipated - l0.dissipated
+    d_stored = e1["total"] - e0["total"]
+    residual = e_in - e_out - d_stored
+    # mechanical side alone: actuator work = mechanical dissipation + change of kinetic,
+    # gravitational and spring energy
+    w_act = l1.actuator_work - l0.actuator_work
+    d_mech = sum(e1[k] - e0[k] for k in ("kinetic", "gravity", "springs"))
+    mech_res = w_act - (l1.mech - l0.mech) - d_mech
+    return {"supply": e_in, "dissipated": e_out, "stored_change": d_stored, "residual": residual,
+            "relative_residual": abs(residual) / max(abs(e_in), 1e-12),
+            "actuator_work": w_act, "mechanical_dissipation": l1.mech - l0.mech, "mechanical_stored_change": d_mech,
+            "mechanical_residual": mech_res,
+            "mechanical_relative_residual": abs(mech_res) / max(abs(w_act), abs(d_mech), 1e-12)}
+
+
+def with_ledger(ctx) -> None:
+    """Switch the kernel's energy ledger on for ``ctx``."""
+    ctx.energy_ledger = True
+    ctx.GP[L.GP_ENERGY] = 1.0
+    np.copyto(ctx.XG[L.XG_E_SUPPLY:L.XG_E_RELIEF_PUMP + 1], 0.0)
+    ctx.XG[L.XG_E_ACT] = 0.0
+    ctx.XG[L.XG_E_COMPRESS] = 0.0

@@ -1,0 +1,103 @@
+"""Component equations against their closed forms, and spec validation."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from sim_core.components.cylinder import cylinder_length
+from sim_core.components.directional_valve import opening, orifice
+from sim_core.components.spool import discretise
+from sim_core.dynamics.rigid_body import axis_rotation
+from sim_core.model.spec import SpecError, load_robot
+
+
+def test_orifice_is_turbulent_far_from_zero_and_laminar_near_it():
+    tr = 1e5
+    for dp in (1e7, 3e6, -5e6):
+        f, _ = orifice(dp, tr)
+        # regularisation error of the turbulent law falls off as (dp_tr/dp)^2 / 4
+        assert f == pytest.approx(math.copysign(math.sqrt(abs(dp)), dp), rel=0.26 * (tr / dp) ** 2)
+    f0, s0 = orifice(0.0, tr)
+    assert f0 == 0.0 and s0 == pytest.approx(1.0 / math.sqrt(tr))   # finite laminar slope
+    for dp in (-2e5, -1e3, 0.0, 5e4, 7e6):
+        h = 1e-3 * max(abs(dp), 1e3)
+        num = (orifice(dp + h, tr)[0] - orifice(dp - h, tr)[0]) / (2 * h)
+        assert orifice(dp, tr)[1] == pytest.approx(num, rel=1e-6)
+        assert orifice(-dp, tr)[0] == pytest.approx(-orifice(dp, tr)[0])
+
+
+def test_opening_characteristic():
+    assert opening(0.05, 0.1, 1.0, 0.0, 0.0) == 0.0          # inside the overlap
+    assert opening(1.0, 0.1, 0.25, 0.45, 0.3) == pytest.approx(1.0)
+    s = np.linspace(0, 1, 50)
+    a = [opening(x, 0.0, 0.25, 0.45, 0.3) for x in s]
+    assert np.all(np.diff(a) >= 0)
+    assert opening(0.5, 0.0, 0.25, 0.45, 0.3) < 0.5              # progressive (harvester fit)
+
+
+def test_command_chain_discretisation_matches_scipy_expm():
+    tau, f, zeta, gain, lag, h = 0.008, 15.0, 0.8, 1.25, 0.05, 2.5e-4
+    wn = 2 * math.pi * f
+    phi, gam = discretise(tau, wn, zeta, gain, lag, h)
+    A = np.zeros((5, 5))
+    B = np.zeros((5, 2))
+    A[0, 0] = A[1, 1] = -1 / tau
+    B[0, 0] = B[1, 1] = 1 / tau
+    A[2, 3] = 1
+    A[3, :4] = [wn**2 * gain, -wn**2 * gain, -wn**2, -2 * zeta * wn]
+    A[4, 2], A[4, 4] = 1 / lag, -1 / lag
+    Maug = np.zeros((7, 7))
+    Maug[:5, :5], Maug[:5, 5:] = A, B
+    E = expm(Maug * h)
+    np.testing.assert_allclose(phi, E[:5, :5], atol=1e-13)
+    np.testing.assert_allclose(gam, E[:5, 5:], atol=1e-13)
+    # steady state: full current difference -> spool at gain * i
+    phi_l, gam_l = discretise(tau, wn, zeta, gain, lag, 10.0)
+    z = phi_l @ np.zeros(5) + gam_l @ np.array([0.8, 0.0])
+    assert z[2] == pytest.approx(1.0, rel=1e-9) and z[4] == pytest.approx(1.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("joint", ["j1", "j2", "j3", "j4", "j5"])
+def test_cylinder_length_and_moment_arm_follow_the_mount_geometry(plants, joint):
+    plant = plants("hydrolek")
+    js = plant.spec.joint(joint)
+    i = plant.tree.index(js.dof)
+    cyl = js.components["cylinder"]
+    c0, d1, d2, lmin, stroke = cyl.linkage(plant.tree.axis[i], plant.tree.lower[i], plant.tree.upper[i])
+    R = np.zeros((3, 3))
+    for q in np.linspace(plant.tree.lower[i], plant.tree.upper[i], 9):
+        axis_rotation(plant.tree.axis[i], q, R)
+        direct = np.linalg.norm(R @ np.array(cyl["rod_mount"]) - np.array(cyl["base_mount"]))
+        L, arm = cylinder_length(q, c0, d1, d2)
+        assert L == pytest.approx(direct, rel=1e-12)
+        num = (cylinder_length(q + 1e-6, c0, d1, d2)[0] - cylinder_length(q - 1e-6, c0, d1, d2)[0]) / 2e-6
+        assert arm == pytest.approx(num, rel=1e-6) and arm > 0
+    assert cylinder_length(plant.tree.lower[i], c0, d1, d2)[0] == pytest.approx(lmin)
+    assert cylinder_length(plant.tree.upper[i], c0, d1, d2)[0] == pytest.approx(lmin + stroke)
+
+
+def test_spec_errors_name_the_parameter():
+    spec = load_robot("hydrolek")
+    with pytest.raises(SpecError, match="joints.j2.valve.rated_flow"):
+        spec.set("joints.j2.valve.rated_flow", -1.0)
+    with pytest.raises(SpecError, match="unknown joint 'j9'"):
+        spec.set("joints.j9.valve.rated_flow", 1e-5)
+    with pytest.raises(SpecError, match="no 'cylinder' section"):
+        spec.set("joints.j6.cylinder.bore", 0.05)
+    with pytest.raises(SpecError, match="bore"):
+        spec.set("joints.j2.cylinder.bore", float("nan"))
+    # a mount that makes positive motion retract the cylinder is refused
+    with pytest.raises(SpecError, match="extend the cylinder"):
+        spec.set("joints.j2.cylinder.rod_mount", [-0.06059, -0.04421, 0.0])
+    with pytest.raises(SpecError, match="unknown effect"):
+        spec.enable_effect("warp_drive", "j2")
+    with pytest.raises(SpecError, match="width"):
+        spec.enable_effect("deadband", "j2", width=99.0)
+    with pytest.raises(SpecError, match="global effect"):
+        spec.enable_effect("bulk_modulus", "j2")
+    with pytest.raises(SpecError, match="applies to cylinder"):
+        spec.enable_effect("area_ratio", "j6", ratio=0.5)
+    with pytest.raises(SpecError, match="no sensor"):
+        spec.enable_effect("sensor_offset", "j6", offset=0.1)
