@@ -7,9 +7,9 @@ class Leakage(Effect):
     """Laminar leakage: across the piston/vanes (internal) and from each chamber to tank (external).
 
     Q_int = C_i (p_A - p_B) from A to B;  Q_ext,A = C_e (p_A - p_T), Q_ext,B = C_e (p_B - p_T).
-    Speed under load drops by about C_i p_L / A; with the valve closed a loaded motor or rotary
-    actuator drifts with the load, and chamber pressures equalise during holds. The harvester swing
-    motor has both (Papadopoulos et al. 2003, Fig. 7).
+    Speed under load drops by about C_i p_L / A; with the valve closed a loaded joint keeps drifting
+    as oil leaks across the piston and to tank, and the chamber pressures redistribute. The
+    harvester swing motor has both (Papadopoulos et al. 2003, Fig. 7).
     """
 
     name = "leakage"
