@@ -33,6 +33,7 @@ class Context:
         self.rng = np.zeros(1, dtype=np.uint64)
         self.faults: dict[tuple[str, str], dict] = {}
         self.energy_ledger = False
+        self.locked: set[str] = set()
         self.reset(seed)
 
     # ---- arrays the kernel reads ---------------------------------------------------------------
@@ -118,6 +119,8 @@ class Context:
         for key, mode in self.faults.items():
             _apply_fault(new, self.spec, key, mode)
         new.GP[L.GP_ENERGY] = 1.0 if self.energy_ledger else 0.0
+        for dof in self.locked:
+            new.DP[self.spec.tree.index(dof), L.DP_LOCKED] = 1.0
         self.lowered = new
         # states of effects that were off are kept in step by the kernel; nothing to re-initialise
 
@@ -151,6 +154,17 @@ class Context:
 
     def apply_overrides(self, data: dict, where: str = "parameter file") -> None:
         self.spec.apply_overrides(data, where)
+        self._relower()
+
+    def lock(self, joints) -> None:
+        """Hold these joints (actuated joint or URDF joint names) rigid at their current angles and stop
+        simulating their actuators; the rest move with the correspondingly reduced dynamics. Used to
+        identify one joint at a time, and by the identification for speed."""
+        dofs = set()
+        for name in joints:
+            dofs.add(self.spec.joint(name).dof if name in self.spec.joint_names else self.spec.tree.dof_names[self.spec.tree.index(name)])
+        self.locked = dofs
+        self.XQ[1, [self.spec.tree.index(d) for d in dofs]] = 0.0
         self._relower()
 
     # ---- faults (HIL fault injection; cleared individually) ----------------------------------------

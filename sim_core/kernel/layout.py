@@ -105,7 +105,8 @@ DP_STOP_K = 2          # end-stop stiffness (N m/rad)
 DP_STOP_C = 3          # end-stop damping (N m s/rad)
 DP_DAMPING = 4         # viscous joint damping (N m s/rad)
 DP_ACT = 5             # index of the actuator driving the joint, -1 if passive
-DP_N = 6
+DP_LOCKED = 6          # 1.0: joint held rigid at its current angle, its actuator not simulated
+DP_N = 7
 
 # --- global parameters ---------------------------------------------------------------------------
 GP_P_SUPPLY = 0        # pump pressure setting (Pa, gauge)

@@ -191,6 +191,9 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
 
     # ---- 1. command path ---------------------------------------------------------------------
     for a in range(na):
+        if DP[int(AP[a, AP_DOF]), DP_LOCKED] != 0.0:
+            act[a, T_S] = 0.0
+            continue
         if AP[a, AP_E_DELAY] != 0.0:
             d = AP[a, AP_DELAY]
             u = delayed_command(a, t - d, t + h - d, HT, HU, XG, XS)
@@ -256,6 +259,9 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
                 Kst[i] = DP[i, DP_STOP_K]
     for a in range(na):
         dof = int(AP[a, AP_DOF])
+        if DP[dof, DP_LOCKED] != 0.0:
+            act[a, T_TAU] = 0.0
+            continue
         comp = AP[a, AP_E_COMPLIANCE] != 0.0
         th = XS[a, XS_TH_A] if comp else q[dof]
         om = XS[a, XS_OM_A] if comp else qd[dof]
@@ -296,6 +302,14 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
         for j in range(n):
             Lf[i, j] = M[i, j]
         Lf[i, i] += h * (Dlin[i] - Sfr[i]) + h * h * Kst[i]   # stop spring implicit: q_new = q + h qd_new
+    for i in range(n):
+        if DP[i, DP_LOCKED] != 0.0:  # held rigid: qdd = 0, the free joints see the reduced dynamics
+            for j in range(n):
+                Lf[i, j] = 0.0
+                Lf[j, i] = 0.0
+            Lf[i, i] = 1.0
+            rhs[i] = 0.0
+            qd[i] = 0.0
     ltl_factor(parent, Lf)
     ltl_solve(parent, Lf, rhs)  # rhs now holds qdd
     for i in range(n):
@@ -314,6 +328,9 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
     ideal_pump = GP[GP_PUMP_QMAX] <= 0.0
     for a in range(na):
         dof = int(AP[a, AP_DOF])
+        if DP[dof, DP_LOCKED] != 0.0:
+            act[a, T_QS] = 0.0
+            continue
         if AP[a, AP_E_COMPLIANCE] != 0.0:
             th = XS[a, XS_TH_A]
             om = XS[a, XS_OM_A]
