@@ -1,0 +1,1 @@
+"""HydroHIL service: the plant at a fixed rate behind a CompactFieldPoint-like interface (REST, CAN)."""

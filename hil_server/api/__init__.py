@@ -1,0 +1,1 @@
+"""REST API (FastAPI): one router per resource, pydantic models for every body."""

@@ -1,0 +1,35 @@
+"""Fault injection: sensor stuck/noisy/offset, spool stuck, leak, hose burst, supply sag."""
+
+from fastapi import APIRouter, Depends
+
+from .deps import get_service, require_token
+from .schemas import FaultRequest
+
+router = APIRouter(tags=["faults"])
+
+
+@router.get("/api/v1/faults")
+def list_faults(svc=Depends(get_service)):
+    return {"faults": list(svc.faults.values())}
+
+
+@router.post("/api/v1/faults", dependencies=[Depends(require_token)])
+def inject(body: FaultRequest, svc=Depends(get_service)):
+    from ..service import ServiceError
+
+    try:
+        params = body.params()
+    except ValueError as exc:
+        raise ServiceError(str(exc)) from None
+    return svc.inject_fault(body.kind, body.joint, params)
+
+
+@router.delete("/api/v1/faults/{fault_id}", dependencies=[Depends(require_token)])
+def clear(fault_id: str, svc=Depends(get_service)):
+    return svc.clear_fault(fault_id)
+
+
+@router.delete("/api/v1/faults", dependencies=[Depends(require_token)])
+def clear_all(svc=Depends(get_service)):
+    svc.clear_faults()
+    return {"faults": []}

@@ -1,0 +1,1 @@
+"""The real-time engine: the plant stepped at a fixed rate in its own process."""
