@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/hydrohil demo
+	$(VENV)/bin/hydrohil serve
 
 test: $(STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
