@@ -1,0 +1,349 @@
+"""The operator panel (viser GUI): per-joint command sliders with a neutral button, E-STOP, readouts
+with units, live plots of command and angle history, fault/watchdog indicators, loop health and the
+connection state.
+
+Threads: GUI callbacks run in viser's threads and only call the link (microseconds in-process; a
+queued, coalesced HTTP request for a remote server). :meth:`OperatorPanel.update` runs in the viewer's
+render thread at a few Hz and only assigns GUI values (viser sends just what changed).
+
+Safety rules:
+* E-STOP engages the service's latched stop (every valve at 0 V until released), zeroes and disables
+  the sliders; a slider cannot command while the stop is engaged.
+* Dead man: when the last browser disconnects, every joint this panel set to a non-zero command is
+  put back to neutral (0 V), so a closed tab or a lost network does not leave a valve open.
+* A slider follows the plant's command when another source (REST, CAN) changes it, except for a
+  second after the operator moved it.
+"""
+
+from __future__ import annotations
+
+import html
+import logging
+import threading
+import time
+
+import numpy as np
+
+from .colors import legend_html
+from .history import History
+from .links import LinkError
+
+log = logging.getLogger("hydrohil.web")
+
+STEP_V = 0.05          # slider resolution (V)
+HOLD_OFF_S = 1.0       # a slider the operator touched is not re-synchronised from the plant for this long
+PLOT_WINDOW_S = 10.0
+
+
+def _badge(text: str, colour: str) -> str:
+    return (f"<span style='background:{colour};color:white;border-radius:4px;padding:0 5px;"
+            f"font-weight:600'>{html.escape(text)}</span>")
+
+
+def _fmt(v, spec: str, none: str = "—") -> str:
+    return none if v is None else format(v, spec)
+
+
+class OperatorPanel:
+    def __init__(self, server, link, *, scene=None, render_rate_hz: float = 40.0):
+        self.server = server
+        self.scene = scene
+        self.link = link
+        spec = link.spec
+        self.joints = list(spec.joint_names)
+        self.ranges = {j: spec.joint(j).command_range for j in self.joints}
+        self.kinds = {j: spec.joint(j).kind for j in self.joints}
+        self.sensed = {j: spec.joint(j).sensed for j in self.joints}
+        self.p_supply = float(spec.supply["pressure"])
+        self.history = History(self.joints, [spec.joint(j).dof for j in self.joints],
+                               int(PLOT_WINDOW_S * render_rate_hz) + 1)
+        self._lock = threading.Lock()
+        self._touched: dict[str, float] = {}
+        self._held: dict[str, float] = {}     # joints this panel commands away from neutral
+        self._estop = False
+        self._last_plot = 0.0
+        self.updates = 0
+        self.notifications: list[str] = []     # what the panel told the operator (tests read it)
+        gui = server.gui
+        gui.configure_theme(control_width="large", show_share_button=False, brand_color=(230, 160, 20))
+
+        self.status = gui.add_html("<i>connecting…</i>")
+        self.estop_button = gui.add_button("E-STOP", color="red", icon="alert-octagon",
+                                           hint="every valve to 0 V (latched until released)")
+        self.release_button = gui.add_button("Release E-STOP", color="gray", icon="lock-open", disabled=True)
+        self.neutral_all = gui.add_button("All neutral", icon="player-stop", hint="every joint to 0 V")
+        if not link.can_command:
+            gui.add_html("<div style='color:#b00;font-size:0.85em;padding:0 0.5em'>Read-only: the server needs a "
+                         "token for commands (hydrohil view --token T).</div>")
+        tabs = gui.add_tab_group()
+        self.sliders, self.neutral_buttons, self.readouts = {}, {}, {}
+        with tabs.add_tab("Joints", icon="adjustments"):
+            many = len(self.joints) > 8
+            for k, j in enumerate(self.joints):
+                lo, hi = self.ranges[j]
+                label = f"{j} · {self.kinds[j]}" + ("" if self.sensed[j] else " · unsensed")
+                with gui.add_folder(label, expand_by_default=not many or k < len(self.joints) // 2):
+                    s = gui.add_slider("command (V)", min=lo, max=hi, step=STEP_V, initial_value=0.0,
+                                       marks=((lo, f"{lo:g}"), (0.0, "0"), (hi, f"{hi:g}")),
+                                       disabled=not link.can_command, hint=f"valve command of {j}, {lo:g}..{hi:g} V")
+                    b = gui.add_button(f"Neutral {j}", icon="player-pause", disabled=not link.can_command,
+                                       hint="this valve to 0 V")
+                    r = gui.add_html("")
+                self.sliders[j], self.neutral_buttons[j], self.readouts[j] = s, b, r
+                s.on_update(self._slider_cb(j))
+                b.on_click(self._neutral_cb(j))
+        with tabs.add_tab("Plots", icon="chart-line"):
+            self.plot_joint = gui.add_dropdown("joint", options=self.joints, initial_value=self.joints[0])
+            empty = (np.zeros(0), np.zeros(0), np.zeros(0))
+            v_lo = min(r[0] for r in self.ranges.values())
+            v_hi = max(r[1] for r in self.ranges.values())
+            self.plot_command = gui.add_uplot(
+                empty, series=({"label": "t (s)"},
+                               {"label": "requested (V)", "stroke": "#1f77b4", "width": 1.5, "scale": "V"},
+                               {"label": "applied (V)", "stroke": "#d62728", "width": 1.5, "scale": "V"}),
+                title="command (V)", scales={"x": {"time": False}, "V": {"auto": False, "range": [v_lo, v_hi]}},
+                axes=({}, {"scale": "V", "size": 50}), aspect=2.0)
+            self.plot_angle = gui.add_uplot(
+                empty, series=({"label": "t (s)"},
+                               {"label": "measured (°)", "stroke": "#2ca02c", "width": 1.5, "scale": "deg"},
+                               {"label": "true (°)", "stroke": "#555555", "width": 1.0, "scale": "deg"}),
+                title="angle (°)", scales={"x": {"time": False}, "deg": {"auto": True}},
+                axes=({}, {"scale": "deg", "size": 50}), aspect=2.0)
+            self.plot_joint.on_update(lambda _ev: self._update_plots(force=True))
+        with tabs.add_tab("Health", icon="heart-rate-monitor"):
+            self.health = gui.add_html("")
+            self.faults = gui.add_html("")
+        gui.add_html(legend_html(self.p_supply))
+        with gui.add_folder("Display", expand_by_default=False):
+            self.show_links = gui.add_checkbox("links", initial_value=True)
+            self.show_actuators = gui.add_checkbox("cylinders and motors", initial_value=True)
+        if scene is not None:
+            self.show_links.on_update(lambda _ev: scene.set_visible(links=self.show_links.value))
+            self.show_actuators.on_update(lambda _ev: scene.set_visible(actuators=self.show_actuators.value))
+        self.estop_button.on_click(self._on_estop)
+        self.release_button.on_click(self._on_release)
+        self.neutral_all.on_click(self._on_neutral_all)
+        self.link.errors.append(self.notify)
+        server.on_client_disconnect(self._on_disconnect)
+
+    # ---- operator actions ----------------------------------------------------------------------------
+    def notify(self, body: str, title: str = "HydroHIL", client=None, colour: str = "red") -> None:
+        self.notifications.append(body)
+        targets = [client] if client is not None else list(self.server.get_clients().values())
+        for c in targets:
+            try:
+                c.add_notification(title=title, body=body, auto_close_seconds=6.0, color=colour)
+            except Exception:  # noqa: BLE001 - a client that just left
+                pass
+
+    def _slider_cb(self, j: str):
+        def cb(ev):
+            if ev.client is None:  # the panel itself set the value (sync, E-STOP): not an operator command
+                return
+            v = float(self.sliders[j].value)
+            if self._estop:
+                self._set_slider(j, 0.0)
+                self.notify("E-STOP is engaged: release it before commanding.", client=ev.client)
+                return
+            try:
+                self.link.set_voltages({j: v})
+            except (LinkError, ValueError) as exc:
+                self.notify(str(exc), client=ev.client)
+                return
+            with self._lock:
+                self._touched[j] = time.monotonic()
+                if v != 0.0:
+                    self._held[j] = v
+                else:
+                    self._held.pop(j, None)
+        return cb
+
+    def _neutral_cb(self, j: str):
+        def cb(ev):
+            try:
+                self.link.neutral([j])
+            except (LinkError, ValueError) as exc:
+                self.notify(str(exc), client=ev.client)
+                return
+            with self._lock:
+                self._touched[j] = time.monotonic()
+                self._held.pop(j, None)
+            self._set_slider(j, 0.0)
+        return cb
+
+    def _on_estop(self, ev) -> None:
+        try:
+            self.link.set_estop(True)
+        except LinkError as exc:
+            self.notify(f"E-STOP NOT ENGAGED: {exc}", client=ev.client)
+            return
+        self._apply_estop(True)
+        log.warning("viewer: E-STOP engaged from the browser")
+
+    def _on_release(self, ev) -> None:
+        try:
+            self.link.set_estop(False)
+        except LinkError as exc:
+            self.notify(str(exc), client=ev.client)
+            return
+        self._apply_estop(False)
+
+    def _on_neutral_all(self, ev) -> None:
+        try:
+            self.link.neutral(None)
+        except (LinkError, ValueError) as exc:
+            self.notify(str(exc), client=ev.client)
+            return
+        with self._lock:
+            self._held.clear()
+            now = time.monotonic()
+            self._touched = {j: now for j in self.joints}
+        for j in self.joints:
+            self._set_slider(j, 0.0)
+
+    def _on_disconnect(self, _client) -> None:
+        if self.server.get_clients():
+            return
+        with self._lock:
+            held, self._held = list(self._held), {}
+        if held and self.link.can_command:
+            try:
+                self.link.neutral(held)
+                log.warning("viewer: last browser left; neutral on %s (dead man)", ", ".join(held))
+            except (LinkError, ValueError) as exc:
+                log.error("viewer: dead-man neutral failed: %s", exc)
+            for j in held:
+                self._set_slider(j, 0.0)
+
+    def _set_slider(self, j: str, v: float) -> None:
+        lo, hi = self.ranges[j]
+        self.sliders[j].value = float(np.clip(round(v / STEP_V) * STEP_V, lo, hi))
+
+    def _apply_estop(self, on: bool) -> None:
+        if on == self._estop:
+            return
+        self._estop = on
+        if on:
+            with self._lock:
+                self._held.clear()
+            for j in self.joints:
+                self._set_slider(j, 0.0)
+        can = self.link.can_command
+        for j in self.joints:
+            self.sliders[j].disabled = on or not can
+        self.release_button.disabled = not on
+        self.release_button.color = "green" if on else "gray"
+
+    # ---- periodic refresh (viewer thread) --------------------------------------------------------------
+    def record(self, state: dict) -> None:
+        """Every rendered state goes into the plot history (cheap; called at the render rate)."""
+        self.history.add(state)
+
+    def update(self, state: dict | None, link_status: dict, viewer_stats: dict) -> None:
+        with self.server.atomic():
+            self._update(state, link_status, viewer_stats)
+
+    def _update(self, state: dict | None, link_status: dict, viewer_stats: dict) -> None:
+        self.updates += 1
+        if state is not None:
+            self._apply_estop(bool(state.get("estop")))
+            self._sync_sliders(state)
+            for j in self.joints:
+                self.readouts[j].content = self._readout(j, state["joints"].get(j, {}))
+            self.faults.content = self._faults_html(state)
+            self.health.content = self._health_html(state, link_status, viewer_stats)
+        self.status.content = self._status_html(state, link_status)
+        self._update_plots()
+
+    def _sync_sliders(self, state: dict) -> None:
+        now = time.monotonic()
+        for j in self.joints:
+            js = state["joints"].get(j)
+            if not js or js.get("source") == "viewer" and self.link.kind == "local":
+                continue
+            with self._lock:
+                if now - self._touched.get(j, -1e9) < HOLD_OFF_S:
+                    continue
+            req = float(js.get("requested_voltage", 0.0))
+            if abs(self.sliders[j].value - req) > STEP_V / 2:
+                self._set_slider(j, req)
+
+    def _update_plots(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last_plot < 0.25:
+            return
+        self._last_plot = now
+        t, v = self.history.series(self.plot_joint.value)
+        self.plot_command.data = (t, v[0], v[1])
+        self.plot_angle.data = (t, np.degrees(v[2]), np.degrees(v[3]))
+
+    # ---- HTML ---------------------------------------------------------------------------------------
+    def _readout(self, j: str, js: dict) -> str:
+        ang = js.get("angle")
+        sv = js.get("sensor_voltage")
+        pa, pb = js.get("pressure_a"), js.get("pressure_b")
+        src = js.get("source", "none")
+        wd = _badge("WATCHDOG", "#c0392b") if js.get("watchdog") else ""
+        sensor = f"{sv:.3f} V" if sv is not None else "unsensed"
+        return (
+            "<div style='font-size:0.82em;line-height:1.35;padding:0 0.5em;font-variant-numeric:tabular-nums'>"
+            f"angle <b>{_fmt(None if ang is None else np.degrees(ang), '+.2f')}°</b> "
+            f"({_fmt(ang, '+.4f')} rad) · sensor <b>{sensor}</b><br>"
+            f"p<sub>A</sub> <b>{_fmt(None if pa is None else pa / 1e5, '.1f')} bar</b> · "
+            f"p<sub>B</sub> <b>{_fmt(None if pb is None else pb / 1e5, '.1f')} bar</b> · "
+            f"valve <b>{_fmt(js.get('command_voltage'), '+.2f')} V</b> "
+            f"(asked {_fmt(js.get('requested_voltage'), '+.2f')} V, {html.escape(str(src))}) {wd}</div>"
+        )
+
+    def _status_html(self, state: dict | None, ls: dict) -> str:
+        conn = _badge("connected", "#2e7d32") if ls.get("connected") else _badge("DISCONNECTED", "#c0392b")
+        where = html.escape(str(ls.get("where", "")))
+        age = ls.get("age_s")
+        lines = [f"<b>{html.escape(self.link.spec.name)}</b> · {conn} {where}"
+                 + (f" · {age * 1e3:.0f} ms old" if ls.get("kind") == "remote" and age is not None else "")]
+        if not ls.get("connected"):
+            lines.append(f"<span style='color:#b00'>{html.escape(str(ls.get('detail', '')))}</span>")
+        if state is not None:
+            loop = state.get("loop", {})
+            late = loop.get("lateness_us", {}) or {}
+            n_f = len(state.get("faults", []))
+            wd = [j for j, js in state["joints"].items() if js.get("watchdog")]
+            estop = _badge("E-STOP ENGAGED", "#c0392b") if state.get("estop") else _badge("E-STOP released", "#2e7d32")
+            faults = _badge(f"{n_f} fault{'s' if n_f != 1 else ''}", "#c0392b" if n_f else "#2e7d32")
+            wdb = _badge("watchdog: " + ", ".join(wd), "#c0392b") if wd else _badge("watchdog ok", "#2e7d32")
+            lines.append(f"{estop} {faults} {wdb}")
+            lines.append(f"t = {state.get('time', 0.0):.2f} s · {html.escape(str(state.get('mode', '')))} · "
+                         f"loop {loop.get('rate_hz', 0.0):.0f} Hz · overruns {loop.get('overruns', 0)} · "
+                         f"late p99 {_fmt(late.get('p99'), '.0f')} µs")
+        return "<div style='font-size:0.85em;line-height:1.6;padding:0 0.5em'>" + "<br>".join(lines) + "</div>"
+
+    def _faults_html(self, state: dict) -> str:
+        rows = []
+        for f in state.get("faults", []):
+            params = ", ".join(f"{k}={v}" for k, v in (f.get("params") or {}).items())
+            rows.append(f"<li>{_badge(f.get('kind', '?'), '#c0392b')} {html.escape(str(f.get('joint') or 'supply'))}"
+                        f" {html.escape(params)}</li>")
+        wd = [j for j, js in state["joints"].items() if js.get("watchdog")]
+        body = "<ul style='margin:0;padding-left:1.2em'>" + "".join(rows) + "</ul>" if rows else "no active faults"
+        wds = "watchdog tripped on " + ", ".join(wd) if wd else "no watchdog trips active"
+        return f"<div style='font-size:0.85em;padding:0 0.5em'><b>Faults</b><br>{body}<br><b>Watchdog</b><br>{wds}</div>"
+
+    def _health_html(self, state: dict, ls: dict, vs: dict) -> str:
+        loop = state.get("loop", {})
+        late = loop.get("lateness_us", {}) or {}
+        rows = [
+            ("plant rate", f"{loop.get('rate_hz', 0.0):.1f} Hz"),
+            ("ticks", f"{loop.get('ticks', 0)}"),
+            ("overruns", f"{loop.get('overruns', 0)}"),
+            ("resyncs", f"{loop.get('resyncs', 0)}"),
+            ("watchdog trips", f"{loop.get('watchdog_trips', 0)}"),
+            ("lateness p50/p99/max", f"{_fmt(late.get('p50'), '.1f')} / {_fmt(late.get('p99'), '.1f')} / "
+                                     f"{_fmt(late.get('max'), '.0f')} µs"),
+            ("real-time priority", "yes" if loop.get("realtime_priority") else "no"),
+            ("supply pressure", f"{state.get('supply_pressure', 0.0) / 1e5:.1f} bar"),
+            ("link", f"{ls.get('kind')} · {html.escape(str(ls.get('detail', '')))} · reconnects {ls.get('reconnects', 0)}"),
+            ("viewer", f"{vs.get('rate_hz', 0.0):.1f} Hz · {vs.get('frame_cpu_ms', 0.0):.2f} ms CPU/frame · "
+                       f"{vs.get('clients', 0)} browser(s)"),
+        ]
+        body = "".join(f"<tr><td style='padding-right:1em'>{k}</td><td><b>{v}</b></td></tr>" for k, v in rows)
+        return f"<div style='font-size:0.85em;padding:0 0.5em'><b>Loop health</b><table>{body}</table></div>"
