@@ -301,9 +301,13 @@ class HilService:
         return self._engine("step", int(ticks), timeout=600.0)
 
     def reset(self, seed: int | None) -> dict:
+        """Initial pose at time 0 with every valve neutral (commands from before must not act on the
+        first tick after a reset; lockstep runs are then reproducible)."""
         if self.recorder.current is not None:
             self.recorder.stop()  # a recording must not run across a reset of sim time
-        return self._engine("reset", seed)
+        out = self._engine("reset", seed)
+        self.write_commands({a: 0.0 for a in range(len(self.spec.joints))}, S.SRC_NONE)
+        return out
 
     # ---- parameters and effects ------------------------------------------------------------------
     def parameters(self) -> dict:

@@ -27,5 +27,5 @@ def step(body: StepRequest, svc=Depends(get_service)):
 
 @router.post("/api/v1/reset", dependencies=[Depends(require_token)])
 def reset(body: ResetRequest | None = None, svc=Depends(get_service)):
-    """Back to the initial pose at time 0 (an active recording is closed first)."""
+    """Back to the initial pose at time 0, every valve neutral (an active recording is closed first)."""
     return svc.reset(body.seed if body else None)

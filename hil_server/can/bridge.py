@@ -55,6 +55,7 @@ class CanBridge:
         self._clock = {"tokens": FLOOD_RATE, "t": time.monotonic()}
         self._fb_counter = 0
         self._tx_lock = threading.Lock()
+        self._fb_lock = threading.Lock()   # one feedback burst per lockstep tick
         self._stop = threading.Event()
         self._last_fb_tick = -1
         self._wd_prev = np.zeros(len(joints))
@@ -150,8 +151,9 @@ class CanBridge:
             self.count("rx", "sync")
             mode = S.MODES[int(self.service.block.state[S.S_MODE])]
             if mode == "lockstep":
-                self.service.step(1)
-                self.send_feedback()
+                with self._fb_lock:
+                    self.service.step(1)
+                    self.send_feedback()
             return
         self.count("rx", "unknown_id")
 
@@ -260,10 +262,12 @@ class CanBridge:
                         next_fb += period
                         if now - next_fb > 0.5:
                             next_fb = now + period
-                elif int(self.service.block.state[S.S_TICK]) != self._last_fb_tick:
-                    self.send_feedback()   # lockstep/paused: after every step (REST or SYNC)
                 else:
-                    self._check_events()
+                    with self._fb_lock:   # lockstep/paused: once after every step (REST or SYNC)
+                        if int(self.service.block.state[S.S_TICK]) != self._last_fb_tick:
+                            self.send_feedback()
+                        else:
+                            self._check_events()
                 if now >= next_status:
                     self.send_status()
                     next_status += 0.1

@@ -10,8 +10,8 @@ Rawmode subset of the protocol, as the reference daemon (socketcand/src/state_ra
 python-can's client speak it: ``< hi >`` on connect; ``< open BUS >`` -> ``< ok >``;
 ``< rawmode >`` -> ``< ok >``; client frames ``< send ID DLC b0 b1 ... >`` (unpadded hex bytes);
 server frames ``< frame ID SEC.USEC DATA >`` (contiguous hex; 3 hex digits = 11-bit id, 8 = 29-bit).
-python-can compares each handshake reply with one ``recv(256)``, so frames to a client start only
-after a short pause following its ``rawmode`` reply. Unparseable input is counted and skipped.
+python-can compares each handshake reply with one ``recv(256)``, so frames to a client are queued
+and only sent after a short pause following its ``rawmode`` reply. Unparseable input is counted and skipped.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ class _Client:
         self.alive = True
         self.dropped = 0
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._quickack = getattr(socket, "TCP_QUICKACK", None)
         threading.Thread(target=self._reader, name=f"socketcand-rx-{addr}", daemon=True).start()
         threading.Thread(target=self._writer, name=f"socketcand-tx-{addr}", daemon=True).start()
 
@@ -70,7 +71,7 @@ class _Client:
         self.sock.sendall(text.encode("ascii"))
 
     def enqueue(self, line: bytes) -> None:
-        if not self.raw or time.monotonic() - self.raw_since < HANDSHAKE_QUIET_S:
+        if not self.raw:
             return
         try:
             self.out.put_nowait(line)
@@ -79,6 +80,8 @@ class _Client:
             self.server.count("dropped_slow_client")
 
     def _writer(self) -> None:
+        while self.alive and (not self.raw or time.monotonic() - self.raw_since < HANDSHAKE_QUIET_S):
+            time.sleep(0.01)  # frames queue up; sent once the handshake reply stands alone
         while self.alive:
             try:
                 line = self.out.get(timeout=0.2)
@@ -102,6 +105,10 @@ class _Client:
             while self.alive:
                 try:
                     data = self.sock.recv(65536)
+                    if self._quickack is not None:
+                        # ACK at once: python-can's client leaves Nagle on, so its second small frame
+                        # of a tick would otherwise wait for our delayed ACK (40-200 ms per tick)
+                        self.sock.setsockopt(socket.IPPROTO_TCP, self._quickack, 1)
                 except OSError:
                     break
                 if not data:

@@ -1,0 +1,96 @@
+"""Service lifecycle on real processes: auth, SIGTERM with an open recording, fuzzing, bad options."""
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from sim_core.dataset import read_csv
+
+from server_helpers import ROOT, ServerProcess
+
+
+def test_mutating_endpoints_need_the_bearer_token(tmp_path):
+    s = ServerProcess(robot="harvester", token="s3cret", tmp_path=tmp_path)
+    try:
+        with httpx.Client(base_url=s.url, timeout=30) as anon:
+            assert anon.get("/api/v1/state").status_code == 200
+            r = anon.put("/api/v1/commands", json={"voltages": {"boom": 2.0}})
+            assert r.status_code == 401 and r.headers.get("www-authenticate") == "Bearer"
+            bad = anon.put("/api/v1/commands", json={"voltages": {"boom": 2.0}}, headers={"Authorization": "Bearer nope"})
+            assert bad.status_code == 403
+            for method, path, body in (("put", "/api/v1/mode", {"mode": "paused"}), ("post", "/api/v1/reset", {}),
+                                       ("patch", "/api/v1/parameters", {"values": {"supply.pressure": 1e7}}),
+                                       ("post", "/api/v1/faults", {"kind": "supply_sag", "factor": 0.5}),
+                                       ("post", "/api/v1/recordings", {}), ("put", "/api/v1/estop", {"engaged": True})):
+                assert getattr(anon, method)(path, json=body).status_code == 401, path
+            assert anon.get("/api/v1/health").json()["auth_required"] is True
+        with s.client() as c:
+            assert c.put("/api/v1/commands", json={"voltages": {"boom": 2.0}}).status_code == 200
+            assert c.get("/api/v1/commands").json()["voltages"]["boom"] == 2.0
+    finally:
+        s.stop()
+
+
+def test_sigterm_flushes_an_open_recording_complete(tmp_path):
+    s = ServerProcess(robot="mars_nd", tmp_path=tmp_path)
+    with s.client() as c:
+        c.post("/api/v1/recordings", json={"name": "until_sigterm"})
+        stop = threading.Event()
+
+        def load():
+            with s.client() as c2:
+                k = 0
+                while not stop.is_set():
+                    try:
+                        c2.put("/api/v1/commands", json={"voltages": {"left_j2": 2.0 if k % 2 else -2.0}})
+                        c2.get("/api/v1/state")
+                    except httpx.HTTPError:
+                        return
+                    k += 1
+
+        th = threading.Thread(target=load)
+        th.start()
+        time.sleep(2.5)
+        stop.set()
+        th.join()
+    # uvicorn shuts down gracefully, then re-raises the signal: exit status -SIGTERM (systemd: clean stop)
+    assert s.terminate() in (0, -signal.SIGTERM)
+    ds = read_csv(s.recordings / "until_sigterm.csv")
+    assert len(ds) > 2000
+    np.testing.assert_allclose(np.diff(ds.time), 1e-3, atol=1e-9)     # every tick, once, to the end
+    assert ds.columns[1] == "u_left_j1" and ds.columns[-1] == "p_right_j7_b"
+    text = (s.recordings / "until_sigterm.csv").read_text()
+    assert text.endswith("\n") and len(text.splitlines()) == len(ds) + 1
+
+
+@pytest.mark.slow
+def test_schemathesis_finds_no_server_errors(tmp_path):
+    s = ServerProcess(robot="hydrolek", tmp_path=tmp_path)
+    try:
+        proc = subprocess.run(
+            [str(ROOT / ".venv" / "bin" / "schemathesis") if (ROOT / ".venv" / "bin" / "schemathesis").exists() else "schemathesis",
+             "run", f"{s.url}/openapi.json", "--checks", "not_a_server_error", "--max-time", "90", "--workers", "1",
+             "--phases", "examples,coverage,fuzzing", "--suppress-health-check", "all"],
+            capture_output=True, text=True, timeout=600, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+        with s.client() as c:
+            assert c.get("/api/v1/health").json()["engine_alive"]   # still alive after the fuzzing
+    finally:
+        s.stop()
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--robot", "nope"], "unknown robot 'nope'"),
+    (["--rate", "0"], "--rate 0"),
+    (["--can", "carrier-pigeon:1"], "unknown CAN transport 'carrier-pigeon'"),
+    (["--params", "/nonexistent.toml"], "no such file"),
+])
+def test_serve_rejects_bad_options(cli, args, message):
+    proc = cli("serve", "--viewer-port", "0", "--port", "0", *args, timeout=120)
+    assert proc.returncode == 2 and message in proc.stderr, proc.stderr
