@@ -1,0 +1,62 @@
+"""hydrohil diagnose: name what the model gets wrong on a measured record and write the extended model."""
+
+
+def register(sub):
+    from .common import add_model_options
+
+    p = sub.add_parser(
+        "diagnose",
+        help="find the effect the model lacks in measured data: diagnosis.json, report, extended.toml",
+        description="Calibrate the nominal model to a measured record, fit every effect of the bank as an "
+                    "extension, accept those that raise the validation fit beyond the noise, and write "
+                    "DIR/diagnosis.json, DIR/report.html and DIR/extended.toml (a --params file).",
+    )
+    p.add_argument("--robot", required=True)
+    p.add_argument("data", metavar="DATA.csv", help="measured record (dataset CSV: time, u_<joint>, q_<joint>, p_<joint>_a/b)")
+    p.add_argument("--validation", metavar="OTHER.csv",
+                   help="separate validation record (default: the last 40 %% of DATA.csv)")
+    p.add_argument("--report", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--format", choices=("html", "md"), default="html", help="report format (default html)")
+    p.add_argument("--workers", type=int, default=0, help="parallel processes for the candidate fits (default: CPU count)")
+    p.add_argument("--effects", nargs="+", metavar="NAME", help="restrict the candidate bank to these effects")
+    p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
+                   help="where the simulation starts: the robot's initial positions, the record's first angles, or "
+                        "auto (the spec's unless the record starts more than 0.1 rad away)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_model_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args):
+    import sys
+
+    from ..effects import EFFECTS
+    from ..identification import diagnosis, report
+    from ..identification.record import load_record
+    from . import CliError
+    from .common import load_configured_robot
+
+    if args.workers < 0:
+        raise CliError(f"--workers {args.workers}: must be 0 (CPU count) or more")
+    if args.effects:
+        bad = [e for e in args.effects if e not in EFFECTS]
+        if bad:
+            raise CliError(f"--effects: unknown effect(s) {', '.join(bad)}; effects: {', '.join(EFFECTS)}")
+    spec = load_configured_robot(args)
+    rec = load_record(args.data, spec, initial_pose=args.initial_pose)
+    val = load_record(args.validation, spec, initial_pose=args.initial_pose) if args.validation else None
+    log = (lambda msg: None) if args.quiet else (lambda msg: print(msg, file=sys.stderr))
+    d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
+                      log=log, effects=args.effects)
+    paths = report.write(d, args.report, spec, fmt=args.format)
+    print(f"{d.verdict}: {args.data} on {spec.name} ({d.timings.get('total', 0):.1f} s)")
+    for s in d.selected:
+        params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
+        flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""
+        print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
+    for j, f in d.baseline_fits.items():
+        if f.get("excited", True):
+            print(f"  fit {j}: {f['angle']:.2f} % -> {d.extended_fits[j]['angle']:.2f} %")
+    for key in ("json", "report", "toml"):
+        print(f"  wrote {paths[key]}")
+    return 0

@@ -1,0 +1,56 @@
+"""hydrohil fit: calibrate nominal parameters to a measured record by output error."""
+
+
+def register(sub):
+    from .common import add_model_options
+
+    p = sub.add_parser(
+        "fit",
+        help="calibrate model parameters to a measured record (output error); writes a --params file",
+        description="Fit free parameters (default: the valve flow gains of the commanded, measured joints) so "
+                    "the free-run simulation matches the record; report the NRMSE fit per channel and the "
+                    "parameter uncertainties. Free keys are parameter paths (joints.j2.valve.rated_flow, "
+                    "joints.j2.sensor.B, supply.pressure) or effect parameters (effects.deadband.boom.width).",
+    )
+    p.add_argument("--robot", required=True)
+    p.add_argument("data", metavar="DATA.csv", help="measured record (dataset CSV)")
+    p.add_argument("--free", nargs="+", metavar="PARAM", help="parameters to fit (default: valve rated_flow of each "
+                   "commanded, measured joint)")
+    p.add_argument("--out", required=True, metavar="PARAMS.toml", help="parameter/effect file to write")
+    p.add_argument("--validation", metavar="OTHER.csv", help="also report the fit on this record")
+    p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
+                   help="where the simulation starts (see 'hydrohil diagnose --help')")
+    p.add_argument("--max-simulations", type=int, default=80, help="budget of model simulations (default 80)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_model_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args):
+    import json
+
+    from ..identification.fitting import run_fit
+    from ..identification.record import load_record
+    from . import CliError
+    from .common import load_configured_robot
+
+    if args.max_simulations < 2:
+        raise CliError(f"--max-simulations {args.max_simulations}: need at least 2")
+    spec = load_configured_robot(args)
+    rec = load_record(args.data, spec, initial_pose=args.initial_pose)
+    val = load_record(args.validation, spec, initial_pose=args.initial_pose) if args.validation else None
+    res = run_fit(spec, rec, args.free, val=val, max_sims=args.max_simulations, out=args.out)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    print(f"fitted {len(res['parameters'])} parameter(s) on {args.data} ({res['simulations']} simulations)")
+    for k, p in res["parameters"].items():
+        lo, hi = p["ci95"]
+        print(f"  {k} = {p['value']:.6g} +- {p['sigma']:.3g} (95 %: {lo:.6g} .. {hi:.6g}; was {p['initial']:.6g})"
+              + ("  [at a search bound]" if p.get("at_bound") else ""))
+    for where, fits in res["fit"].items():
+        for j, ch in fits.items():
+            text = ", ".join(f"{c} {v['before']:.2f} -> {v['after']:.2f} % (+-{v['spread']:.2f})" for c, v in ch.items())
+            print(f"  fit on {where}, {j}: {text}")
+    print(f"  wrote {args.out}")
+    return 0

@@ -1,0 +1,268 @@
+"""diagnose: show what the model gets wrong on measured data, name the cause, extend, measure the gain.
+
+The procedure (research note 'discrepancy catalog' §4):
+
+1. align and check the data (record.py): columns, start pose, noise floor, end-stop contact;
+2. baseline: calibrate the nominal flow gains by output error, simulate, compute the fits and the
+   residual tests;
+3. screening: signature statistics give initial guesses and the report's evidence (signatures.py);
+4. decision: fit every candidate, accept by validation gain, BIC and identifiability, greedily for
+   several effects (selection.py); refit the result with the default integrator settings;
+5. the null outcome ("no_significant_discrepancy") is an answer like any other.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import output_error as oe
+from .calibration import calibrate, default_free
+from .candidates import bank, decider
+from .metrics import noise_std, nrmse_fit, velocity
+from .parameters import FreeParameter
+from .record import DataCheck, Record, check_record
+from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
+from .selection import (AMBIGUITY, GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, free_list, model_with,
+                        select)
+from .signatures import joint_signatures, public
+from .simulation import Outputs, Runner, choose_numerics, model_spec
+
+
+@dataclass
+class Diagnosis:
+    robot: str
+    record: Record
+    validation: Record
+    split: int                              # first validation sample in ``validation``
+    check: DataCheck
+    numerics: dict
+    baseline_spec: object
+    extended_spec: object
+    baseline_out: Outputs
+    extended_out: Outputs
+    baseline_fits: dict
+    extended_fits: dict
+    calibration: dict
+    selected: list[dict]
+    candidates: list[dict]
+    evaluations: list[list[Evaluation]]
+    signatures: dict
+    tests: dict
+    stopped: str
+    ceiling: float
+    notes: list[str] = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def verdict(self) -> str:
+        return "discrepancy" if self.selected else "no_significant_discrepancy"
+
+    def to_json(self) -> dict:
+        return {
+            "robot": self.robot,
+            "verdict": self.verdict,
+            "baseline": {"fit": {j: f["angle"] for j, f in self.baseline_fits.items()},
+                         "score": {j: f["score"] for j, f in self.baseline_fits.items() if "score" in f},
+                         "channels": self.baseline_fits},
+            "extended": {"fit": {j: f["angle"] for j, f in self.extended_fits.items()},
+                         "score": {j: f["score"] for j, f in self.extended_fits.items() if "score" in f},
+                         "channels": self.extended_fits},
+            "selected": self.selected,
+            "candidates": self.candidates,
+            "decision": {
+                "gain": "validation gain of the joint's score: mean NRMSE fit (percent) of angle, velocity and, "
+                        "when recorded, chamber pressures",
+                "threshold_points": THRESHOLD_POINTS, "noise_factor": NOISE_FACTOR,
+                "score_ceiling": self.ceiling, "stopped": self.stopped,
+            },
+            "validation": {"source": self.validation.source, "first_sample": self.split,
+                           "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split)},
+            "calibration": self.calibration,
+            "data": self.check.to_dict() | {"targets": self.record.targets, "pressures": self.record.has_pressures,
+                                            "notes": self.notes},
+            "numerics": self.numerics,
+            "signatures": {j: public(s) for j, s in self.signatures.items()},
+            "residual_tests": {k: {j: public(v) for j, v in t.items()} for k, t in self.tests.items()},
+            "timings_s": self.timings,
+        }
+
+
+def _split(rec: Record, val: Record | None, targets: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
+    if val is None:
+        n = int(round(rec.n * 0.6))
+        return (oe.Problem(rec, targets, n=n), oe.Problem(rec, targets, start=n), rec, n)
+    missing = [f"q_{j}" for j in targets if j not in val.angles]
+    if missing:
+        raise ValueError(f"--validation {val.source}: no column {', '.join(missing)} (the estimation record's measured, "
+                         f"commanded joints)")
+    return oe.Problem(rec, targets), oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0
+
+
+def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
+    """Per measured joint: channel fits (and score) on the validation window."""
+    fits = prob.fits(out)
+    for j, y in rec.angles.items():
+        if j not in fits:
+            fits[j] = {"angle": nrmse_fit(y[start:], out.angles[j][start:]) if out.ok else -math.inf,
+                       "excited": False}
+    return fits
+
+
+def _pressure_noise(rec: Record) -> dict[str, float]:
+    return {j: 0.5 * (noise_std(pa) + noise_std(pb)) for j, (pa, pb) in rec.pressures.items()}
+
+
+def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progress: bool = True,
+        log=None, effects: list[str] | None = None) -> Diagnosis:
+    log = log or (lambda msg: None)
+    t_start = time.perf_counter()
+    timings: dict = {}
+    targets = rec.targets
+    check = check_record(rec, spec)
+    notes = list(rec.notes) + (list(val.notes) if val is not None else [])
+    for j, share in check.end_stop_share.items():
+        if share > 0.05:
+            notes.append(f"{j}: {100 * share:.0f} % of the samples are within {0.01:g} rad of a joint limit (end-stop contact)")
+    est, vprob, vrec, split = _split(rec, val, targets)
+    m0 = model_spec(spec)
+
+    # numerics for the many candidate fits, checked on this record
+    fast, numerics = choose_numerics(m0, rec, est.n)
+    vfast = Runner(vrec, fast.substep)
+    accurate, vaccurate = Runner(rec), Runner(vrec)
+    timings["numerics"] = time.perf_counter() - t_start
+
+    # baseline: calibrate the nominal flow gains
+    keys = default_free(spec, rec)
+    log(f"calibrating {', '.join(keys)}")
+    cal = calibrate(m0, fast, est, keys)
+    base_fast = cal.spec
+    timings["baseline"] = time.perf_counter() - t_start
+
+    # screening on the estimation data
+    out_est = fast.simulate(base_fast, est.n)
+    sigs, guesses = {}, {}
+    for j in targets:
+        inst = [e for e in spec.effects if e.name == "deadband" and e.joint == j]
+        sig = joint_signatures(rec.time[: est.n], rec.angles[j][: est.n], out_est.angles[j][: est.n],
+                               rec.u(j)[: est.n], check.noise[j], rec.rate,
+                               model_deadband=inst[0].params["width"] if inst else 0.0)
+        sigs[j] = sig
+        guesses[j] = sig["guesses"]
+    cands = bank(base_fast, targets, guesses, effects)
+    timings["screening"] = time.perf_counter() - t_start
+
+    pnoise = _pressure_noise(rec)
+    if val is not None:
+        pn_val = _pressure_noise(val)
+        noise = {j: noise_std(val.angles[j]) for j in targets}
+    else:
+        pn_val = pnoise
+        noise = {j: check.noise[j] for j in targets}
+    st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
+                 grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures))
+    sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log)
+    timings["selection"] = time.perf_counter() - t_start
+
+    # final refit of the chosen model with the default integrator settings
+    base_acc = calibrate(base_fast, accurate, est, keys, span=1.5, max_sims=12).spec
+    accepted = [(e.candidate, e.effect_params()) for e in sel.accepted]
+    ext_acc = base_acc
+    final: oe.FitResult | None = None
+    if accepted:
+        free = free_list(sel.model, None, accepted, keys)
+        final = oe.fit(accurate, est, sel.model, free, max_sims=6 * (len(free) + 1), tol=1e-3)
+        ext_acc = final.spec
+    base_out = vaccurate.simulate(base_acc, vprob.n)
+    ext_out = vaccurate.simulate(ext_acc, vprob.n) if accepted else base_out
+    base_fits = _fits_all(vprob, base_out, vrec, split)
+    ext_fits = _fits_all(vprob, ext_out, vrec, split)
+    timings["final"] = time.perf_counter() - t_start
+
+    selected = []
+    for i, ev in enumerate(sel.accepted):
+        c = ev.candidate
+        params = {}
+        ci = {}
+        for fp in c.free:
+            name = fp.key.split(".")[-1]
+            v = final.values[fp.key] if final is not None else ev.values[fp.key]
+            params[name] = _absent(fp, v, ev)
+            lo_hi = (final.ci95 if final is not None else ev.ci95).get(fp.key, [v, v])
+            ci[name] = [float(lo_hi[0]), float(lo_hi[1])]
+        others = [e for e in sel.rounds[ev.round - 1] if e is not ev]
+        runner_up = max(others, key=lambda e: e.gain) if others else None
+        item = {"effect": c.effect, "joint": c.joint, "params": params, "ci95": ci, "gain": round(ev.gain, 3),
+                "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
+                "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
+                "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
+                "refit_of_nominal": c.existing, "round": ev.round}
+        if runner_up is not None:
+            item["runner_up"] = {"effect": runner_up.candidate.effect, "joint": runner_up.candidate.joint,
+                                 "gain": round(runner_up.gain, 3)}
+            if runner_up.gain >= AMBIGUITY * ev.gain and (runner_up.candidate.effect, runner_up.candidate.joint) != (c.effect, c.joint):
+                item["ambiguous"] = True
+                item["decided_by"] = decider(c.effect, runner_up.candidate.effect, rec.has_pressures)
+            else:
+                item["ambiguous"] = False
+        selected.append(item)
+
+    candidates = []
+    for r, evals in enumerate(sel.rounds, start=1):
+        for ev in sorted(evals, key=lambda e: -e.gain):
+            candidates.append({
+                "effect": ev.candidate.effect, "joint": ev.candidate.joint, "gain": round(ev.gain, 3),
+                "bic_delta": _num(ev.bic_delta), "params": {k: _num(v) for k, v in ev.effect_params().items()},
+                "round": r, "accepted": ev in sel.accepted, "rejected_because": ev.reasons,
+                "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
+                "noise_spread": round(ev.spread, 4),
+            })
+
+    calib = {"free": keys, "values": dict(cal.result.values), "sigma": cal.result.sigma, "ci95": cal.result.ci95}
+    tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
+             "extended": residual_tests(vrec, vprob, ext_out, split)}
+    timings["total"] = time.perf_counter() - t_start
+    return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
+                     ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
+                     {k: round(v, 2) for k, v in timings.items()})
+
+
+def _absent(fp: FreeParameter, v: float, ev: Evaluation) -> float:
+    """A parameter that ended where its effect vanishes is reported at that value."""
+    null = fp.null
+    if ev.bounds.get(fp.key) and null is not None and math.isfinite(null):
+        side = ev.bounds[fp.key]
+        if (side == "lower" and null <= fp.lower) or (side == "upper" and null >= fp.upper):
+            return float(null)
+    return float(v)
+
+
+def _num(v: float):
+    return None if v is None or not math.isfinite(v) else round(float(v), 6)
+
+
+def residual_tests(rec: Record, prob: oe.Problem, out: Outputs, start: int) -> dict:
+    """Whiteness, independence and spectra of the validation residual, per joint."""
+    res = {}
+    if not out.ok:
+        return res
+    for j in prob.joints:
+        y = rec.angles[j][start: prob.n]
+        yh = out.angles[j][start: prob.n]
+        w = velocity(rec.angles[j][: prob.n], rec.dt)[start:]
+        wh = velocity(out.angles[j][: prob.n], rec.dt)[start:]
+        rw = w - wh
+        dec = max(1, int(round(0.075 * rec.rate)))
+        q, p = ljung_box(rw[::dec], lags=20)
+        ind = independence(rw, rec.u(j)[start: prob.n], wh, rec.rate)
+        f, pxx = spectrum(rw, rec.rate)
+        H = transfer_estimate(wh, w, rec.rate) if np.ptp(wh) > 0 else None
+        res[j] = {"ljung_box_Q": q, "ljung_box_p": p,
+                  "independence": {k: {kk: vv for kk, vv in v.items() if kk not in ("lags_s", "r")} for k, v in ind.items()},
+                  "angle_rms": float(np.sqrt(np.mean((y - yh) ** 2))),
+                  "_independence": ind, "_spectrum": (f, pxx), "_etfe": H}
+    return res

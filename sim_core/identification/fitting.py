@@ -1,0 +1,113 @@
+"""``hydrohil fit``: calibrate chosen parameters on a whole record and report fits with uncertainties.
+
+The search runs with the fast integrator substep checked on the record; the result is polished with
+the default substep, which also gives the Jacobian for the uncertainties. Fits are reported per
+channel (angle, velocity, pressures) before and after, each with its spread over re-drawn sensor
+noise of the size measured in the record.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import output_error as oe
+from .calibration import default_free
+from .metrics import noise_std
+from .parameters import FreeParameterError, free_parameter
+from .params_file import overrides, write_params
+from .record import Record
+from .simulation import Runner, choose_numerics, model_spec
+
+NOISE_DRAWS = 16
+
+
+def _check_keys(spec, keys: list[str]) -> None:
+    for k in keys:
+        parts = k.split(".")
+        if parts[0] == "effects" and len(parts) in (3, 4):
+            name = parts[1]
+            joint = parts[2] if len(parts) == 4 else None
+            if not any(e.name == name and e.joint == joint for e in spec.effects):
+                where = f":joint={joint}" if joint else ""
+                raise FreeParameterError(f"--free {k}: effect {name}{' on ' + joint if joint else ''} is not in the model; "
+                                         f"switch it on first (--effect {name}{where})")
+        if parts[-1] in ("noise", "bits"):
+            raise FreeParameterError(f"--free {k}: sensor noise and resolution are properties of the data, not fitted")
+
+
+def channel_spread(prob: oe.Problem, out, noise: dict[str, float], pnoise: dict[str, float]) -> dict[str, dict[str, float]]:
+    """Standard deviation of each channel's fit over re-drawn measurement noise."""
+    rng = np.random.default_rng(2024)
+    samples: dict[str, dict[str, list[float]]] = {}
+    for _ in range(NOISE_DRAWS):
+        angles, pressures = {}, {}
+        for j in prob.joints:
+            y = out.angles[j][: prob.n]
+            angles[j] = y + rng.normal(0.0, noise.get(j, 0.0), y.size)
+            if (j, "p_a") in prob.meas:
+                pa, pb = out.pressures[j]
+                s = pnoise.get(j, 0.0)
+                pressures[j] = (pa[: prob.n] + rng.normal(0, s, prob.n), pb[: prob.n] + rng.normal(0, s, prob.n))
+        rec = Record("noise", prob.rec.time[: prob.n], prob.rec.U[: prob.n], angles, pressures, prob.rec.joint_names,
+                     prob.rec.excited, prob.rec.initial_pose)
+        fits = oe.Problem(rec, prob.joints, n=prob.n, start=prob.start, pressures=prob.use_pressures).fits(out)
+        for j, f in fits.items():
+            for c, v in f.items():
+                if c != "score":
+                    samples.setdefault(j, {}).setdefault(c, []).append(v)
+    return {j: {c: float(np.std(v)) for c, v in ch.items()} for j, ch in samples.items()}
+
+
+def _fits(prob: oe.Problem, before, after, rec: Record) -> dict:
+    noise = {j: noise_std(rec.angles[j]) for j in prob.joints}
+    pnoise = {j: 0.5 * (noise_std(a) + noise_std(b)) for j, (a, b) in rec.pressures.items()}
+    fb, fa = prob.fits(before), prob.fits(after)
+    spread = channel_spread(prob, after, noise, pnoise) if after.ok else {}
+    res = {}
+    for j in prob.joints:
+        res[j] = {c: {"before": fb[j][c], "after": fa[j][c], "spread": spread.get(j, {}).get(c, float("nan"))}
+                  for c in fa[j] if c != "score"}
+    return res
+
+
+def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = None, max_sims: int = 80,
+            out: str | None = None) -> dict:
+    keys = list(keys or default_free(spec, rec))
+    _check_keys(spec, keys)
+    m0 = model_spec(spec)
+    free = [free_parameter(m0, k) for k in keys]      # validates every key (clear errors)
+    targets = rec.targets
+    prob = oe.Problem(rec, targets)
+    fast, numerics = choose_numerics(m0, rec)
+    res = oe.fit(fast, prob, m0, free, max_sims=max_sims, uncertainty=False)
+    accurate = Runner(rec)
+    polish = [free_parameter(res.spec, k, span=1.5) if fp.log else fp for k, fp in zip(keys, free)]
+    final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
+    before = accurate.simulate(m0)
+    after = accurate.simulate(final.spec)
+    result = {
+        "robot": spec.name, "source": rec.source, "simulations": res.sims + final.sims, "numerics": numerics,
+        "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)},
+    }
+    if val is not None:
+        missing = [f"q_{j}" for j in targets if j not in val.angles]
+        if missing:
+            raise ValueError(f"--validation {val.source}: no column {', '.join(missing)}")
+        vprob = oe.Problem(val, targets)
+        vr = Runner(val)
+        result["fit"][val.source] = _fits(vprob, vr.simulate(m0), vr.simulate(final.spec), val)
+    for fp, k in zip(polish, keys):
+        v = final.values[k]
+        result["parameters"][k] = {"value": v, "initial": free[keys.index(k)].get(m0), "sigma": final.sigma.get(k, float("nan")),
+                                   "ci95": final.ci95.get(k, [v, v]), "unit": fp.unit, "at_bound": final.at_bound(k)}
+    if out:
+        configured = spec.copy()
+        for k in keys:
+            free[keys.index(k)].apply(configured, final.values[k])
+        data = overrides(configured)
+        data["diagnosis"] = {"generated_by": "hydrohil fit", "source": rec.source, "free": keys,
+                             "sigma": {k: p["sigma"] for k, p in result["parameters"].items()},
+                             "fit": {j: {c: v["after"] for c, v in ch.items()} for j, ch in result["fit"][rec.source].items()}}
+        write_params(out, data, header=f"Calibrated by 'hydrohil fit' on {rec.source}.\n"
+                                       f"Use with: hydrohil simulate --robot {spec.name} --params {out} ...")
+    return result

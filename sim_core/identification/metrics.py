@@ -1,0 +1,89 @@
+"""Goodness of fit and signal helpers shared by calibration, residual tests and selection.
+
+The fit is MATLAB's ``compare`` NRMSE fit, ``100 (1 - ||y - yhat|| / ||y - mean(y)||)`` in percent
+per channel: 100 is perfect, 0 is no better than the mean, and it can be negative.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+
+def nrmse_fit(y: np.ndarray, yhat: np.ndarray) -> float:
+    """MATLAB's NRMSE fit in percent (``goodnessOfFit(yhat, y, 'NRMSE')`` is ``1 - fit/100``)."""
+    y = np.asarray(y, dtype=float)
+    yhat = np.asarray(yhat, dtype=float)
+    den = float(np.linalg.norm(y - y.mean()))
+    num = float(np.linalg.norm(y - yhat))
+    if den <= 0.0:
+        return 100.0 if num == 0.0 else -math.inf
+    return 100.0 * (1.0 - num / den)
+
+
+def savgol_window(rate: float, seconds: float = 0.075, minimum: int = 5) -> int:
+    """Odd Savitzky-Golay window of about ``seconds`` at ``rate`` Hz."""
+    n = max(minimum, int(round(seconds * rate)))
+    return n if n % 2 else n + 1
+
+
+def velocity(y: np.ndarray, dt: float, window: int | None = None) -> np.ndarray:
+    """Smoothed derivative (Savitzky-Golay, order 2): raw differences amplify sensor noise."""
+    y = np.asarray(y, dtype=float)
+    w = window or savgol_window(1.0 / dt)
+    if y.size < w:
+        return np.gradient(y, dt)
+    return savgol_filter(y, w, 2, deriv=1, delta=dt)
+
+
+def noise_std(y: np.ndarray) -> float:
+    """Robust estimate of white measurement noise from second differences.
+
+    For a smooth motion sampled fast, the second difference is dominated by noise (variance 6
+    sigma^2); the median absolute deviation ignores the steps and reversals.
+    """
+    y = np.asarray(y, dtype=float)
+    if y.size < 5:
+        return 0.0
+    d2 = np.diff(y, 2)
+    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    sigma = 1.4826 * mad / math.sqrt(6.0)
+    if sigma == 0.0:
+        # quantised and mostly still: use the quantisation step seen in the data
+        steps = np.abs(np.diff(y))
+        steps = steps[steps > 0]
+        if steps.size:
+            sigma = float(np.min(steps)) / math.sqrt(12.0)
+    return sigma
+
+
+def fit_ceiling(y: np.ndarray, sigma: float) -> float:
+    """Best fit a perfect model can reach on ``y`` with white noise of ``sigma`` (the noise floor)."""
+    y = np.asarray(y, dtype=float)
+    den = float(np.linalg.norm(y - y.mean()))
+    if den <= 0.0:
+        return 100.0
+    return 100.0 * (1.0 - sigma * math.sqrt(y.size) / den)
+
+
+def effective_samples(r: np.ndarray, max_lag: int | None = None) -> float:
+    """N_eff = N / (1 + 2 sum rho_k) of a coloured residual (sum until rho first drops below 0.05)."""
+    r = np.asarray(r, dtype=float)
+    n = r.size
+    if n < 4:
+        return float(n)
+    r = r - r.mean()
+    var = float(r @ r)
+    if var <= 0.0:
+        return float(n)
+    max_lag = max_lag or min(n // 4, 2000)
+    spec = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec))[: max_lag + 1] / var
+    s = 0.0
+    for k in range(1, max_lag + 1):
+        if acf[k] < 0.05:
+            break
+        s += acf[k]
+    return max(1.0, n / (1.0 + 2.0 * s))

@@ -1,0 +1,252 @@
+"""Output-error fitting: bounded least squares on free-run simulated channels.
+
+A hydraulic joint integrates its command, so one wrong gain turns into a growing angle error; the
+cost therefore stacks, per joint, the angle and its smoothed velocity (and the chamber pressures when
+recorded), each normalised by the measured channel's spread, so each term is about (1 - fit)^2.
+Non-smooth parameters (deadband, delay, backlash, ...) are started from the best point of a grid;
+``scipy.optimize.least_squares`` ('trf', box bounds) refines. Uncertainties come from the Jacobian,
+``cov = s^2 (J'J)^-1``, inflated by N/N_eff because output-error residuals are coloured.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .metrics import effective_samples, nrmse_fit, velocity
+from .parameters import FreeParameter
+from .record import Record
+from .simulation import Outputs, Runner
+
+PRESSURE_WEIGHT = 0.5      # each of p_a, p_b: together they weigh as much as the angle
+FAIL_RESIDUAL = 10.0       # normalised residual of a simulation that failed (far worse than any fit)
+
+
+class Problem:
+    """The measured channels of ``joints`` on samples [start, n) of a record, normalised."""
+
+    def __init__(self, rec: Record, joints: list[str], n: int | None = None, start: int = 0,
+                 pressures: bool = True):
+        self.rec = rec
+        self.n = rec.n if n is None else n
+        self.start = start
+        self.joints = list(joints)
+        self.use_pressures = pressures and any(j in rec.pressures for j in self.joints)
+        sl = slice(start, self.n)
+        self.meas: dict[tuple[str, str], np.ndarray] = {}
+        self.weight: dict[tuple[str, str], float] = {}
+        for j in self.joints:
+            y = rec.angles[j][: self.n]
+            self.meas[(j, "angle")] = y[sl]
+            self.meas[(j, "velocity")] = velocity(y, rec.dt)[sl]
+            self.weight[(j, "angle")] = self.weight[(j, "velocity")] = 1.0
+            if self.use_pressures and j in rec.pressures:
+                pa, pb = rec.pressures[j]
+                self.meas[(j, "p_a")] = pa[: self.n][sl]
+                self.meas[(j, "p_b")] = pb[: self.n][sl]
+                self.weight[(j, "p_a")] = self.weight[(j, "p_b")] = PRESSURE_WEIGHT
+        self.scale = {}
+        for k, y in self.meas.items():
+            s = float(np.linalg.norm(y - y.mean()))
+            self.scale[k] = s if s > 0 else 1.0
+        self.size = sum(y.size for y in self.meas.values())
+
+    def simulated(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
+        sl = slice(self.start, self.n)
+        sim = {}
+        for j in self.joints:
+            y = out.angles[j][: self.n]
+            sim[(j, "angle")] = y[sl]
+            sim[(j, "velocity")] = velocity(y, self.rec.dt)[sl]
+            if (j, "p_a") in self.meas:
+                sim[(j, "p_a")] = out.pressures[j][0][: self.n][sl]
+                sim[(j, "p_b")] = out.pressures[j][1][: self.n][sl]
+        return sim
+
+    def residuals(self, out: Outputs) -> np.ndarray:
+        if not out.ok:
+            return np.full(self.size, FAIL_RESIDUAL / math.sqrt(self.size))
+        sim = self.simulated(out)
+        parts = [(self.meas[k] - sim[k]) * (math.sqrt(self.weight[k]) / self.scale[k]) for k in self.meas]
+        return np.concatenate(parts)
+
+    def channel_residuals(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
+        sim = self.simulated(out)
+        return {k: self.meas[k] - sim[k] for k in self.meas}
+
+    def fits(self, out: Outputs) -> dict[str, dict[str, float]]:
+        """Per joint: NRMSE fit of angle, velocity and (recorded) pressures, and their score."""
+        if not out.ok:
+            return {j: {"angle": -math.inf, "velocity": -math.inf, "score": -math.inf} for j in self.joints}
+        sim = self.simulated(out)
+        res: dict[str, dict[str, float]] = {}
+        for j in self.joints:
+            f = {"angle": nrmse_fit(self.meas[(j, "angle")], sim[(j, "angle")]),
+                 "velocity": nrmse_fit(self.meas[(j, "velocity")], sim[(j, "velocity")])}
+            if (j, "p_a") in self.meas:
+                f["pressure"] = 0.5 * (nrmse_fit(self.meas[(j, "p_a")], sim[(j, "p_a")])
+                                       + nrmse_fit(self.meas[(j, "p_b")], sim[(j, "p_b")]))
+            f["score"] = score(f)
+            res[j] = f
+        return res
+
+
+def score(f: dict[str, float]) -> float:
+    """The decision score of one joint: the mean of its channel fits."""
+    vals = [f[k] for k in ("angle", "velocity", "pressure") if k in f]
+    return float(np.mean(vals))
+
+
+@dataclass
+class FitResult:
+    free: list[FreeParameter]
+    values: dict[str, float]
+    cost: float                       # sum of squared normalised residuals
+    sigma: dict[str, float] = field(default_factory=dict)
+    ci95: dict[str, list[float]] = field(default_factory=dict)
+    correlation: np.ndarray | None = None
+    sims: int = 0
+    ok: bool = True
+    spec: object = None
+    x: np.ndarray | None = None       # optimum in the normalised coordinates
+    residual: np.ndarray | None = None
+    start_spec: object = None         # the spec the free values are applied to
+
+    def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
+        """'lower'/'upper' when the estimate sits on a search bound, else None."""
+        fp = next(f for f in self.free if f.key == key)
+        x = fp.to_x(self.values[key])
+        if x <= tol:
+            return "lower"
+        if x >= 1.0 - tol:
+            return "upper"
+        return None
+
+
+class _Budget(Exception):
+    pass
+
+
+def _spec_at(spec, free, x):
+    s = spec.copy()
+    for fp, xi in zip(free, x):
+        fp.apply(s, fp.from_x(float(xi)))
+    return s
+
+
+def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, grid: list[list[float]] | None = None,
+        grid_problem: Problem | None = None, start_cost: float | None = None, max_sims: int = 60,
+        uncertainty: bool = True, tol: float = 1e-4) -> FitResult:
+    """Fit the values of ``free`` in ``spec`` (a model spec) to the problem's channels.
+
+    ``grid``: starting points (physical values, one list per point, in ``free``'s order), ranked on
+    ``grid_problem`` (default: the problem itself; a shorter window is cheaper); the current values
+    are a starting point too, scored ``start_cost`` on the grid problem when that is known."""
+    spec = spec.copy()
+    x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
+    sims = [0]
+    best = {"cost": math.inf, "x": x0.copy(), "r": None}
+
+    def spec_at(x):
+        return _spec_at(spec, free, x)
+
+    def resid(x):
+        if sims[0] >= max_sims:
+            raise _Budget
+        sims[0] += 1
+        try:
+            s = spec_at(x)
+        except ValueError:
+            return np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
+        r = problem.residuals(runner.simulate(s, problem.n))
+        c = float(r @ r)
+        if c < best["cost"]:
+            best.update(cost=c, x=np.array(x, dtype=float), r=r)
+        return r
+
+    starts = [np.array([fp.to_x(v) for fp, v in zip(free, point)]) for point in grid or []]
+    try:
+        if starts:
+            gp = grid_problem or problem
+            costs = []
+            for x in starts:
+                if sims[0] >= max_sims:
+                    raise _Budget
+                sims[0] += 1
+                try:
+                    out_g = runner.simulate(spec_at(x), gp.n)
+                except ValueError:
+                    out_g = None
+                r = gp.residuals(out_g) if out_g is not None else np.full(1, FAIL_RESIDUAL)
+                costs.append(float(r @ r))
+            if start_cost is None:
+                sims[0] += 1
+                r = gp.residuals(runner.simulate(spec_at(x0), gp.n))
+                start_cost = float(r @ r)
+            starts.append(x0)
+            costs.append(start_cost)
+            x_start = starts[int(np.argmin(costs))]
+        else:
+            x_start = x0
+        if free:
+            least_squares(resid, x_start, bounds=(0.0, 1.0), method="trf", diff_step=1e-3, x_scale=1.0,
+                          ftol=tol, xtol=tol, gtol=1e-8)
+        else:
+            resid(x0)
+    except _Budget:
+        pass
+    x = best["x"]
+    values = {fp.key: fp.from_x(float(xi)) for fp, xi in zip(free, x)}
+    out = FitResult(free, values, best["cost"], sims=sims[0], spec=spec_at(x), x=x, residual=best["r"], start_spec=spec)
+    if best["r"] is None:
+        out.ok = False
+        return out
+    if uncertainty and free:
+        add_uncertainty(out, runner, problem)
+    return out
+
+
+def add_uncertainty(out: FitResult, runner, problem) -> None:
+    """Forward-difference Jacobian at the optimum (steps of 1e-3 of the search range, pushed inward
+    at the bounds) and the covariance ``s^2 (J'J)^-1 N/N_eff`` mapped to physical units."""
+    x, r0 = out.x, out.residual
+    if x is None or r0 is None or not out.free:
+        return
+    k = x.size
+    J = np.zeros((r0.size, k))
+    for i in range(k):
+        h = 1e-3 if x[i] + 1e-3 <= 1.0 else -1e-3
+        xp = x.copy()
+        xp[i] += h
+        out.sims += 1
+        J[:, i] = (problem.residuals(runner.simulate(_spec_at(out.start_spec, out.free, xp), problem.n)) - r0) / h
+    m = r0.size
+    dof = max(m - k, 1)
+    s2 = float(r0 @ r0) / dof
+    # coloured residuals: the information is that of N_eff independent samples, not N
+    m_eff = 0.0
+    pos = 0
+    for key, y in problem.meas.items():
+        seg = r0[pos: pos + y.size]
+        m_eff += effective_samples(seg)
+        pos += y.size
+    inflate = max(1.0, m / max(m_eff, 1.0))
+    JtJ = J.T @ J
+    try:
+        cov = np.linalg.inv(JtJ) * s2 * inflate
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(JtJ) * s2 * inflate
+    sx = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out.correlation = cov / np.outer(sx, sx)
+    for fp, xi, si in zip(out.free, x, sx):
+        v = fp.from_x(float(xi))
+        out.sigma[fp.key] = float(abs(fp.dv_dx(v)) * si) if np.isfinite(si) else math.inf
+        lo = fp.from_x(float(xi - 1.96 * si)) if np.isfinite(si) else fp.lower
+        hi = fp.from_x(float(xi + 1.96 * si)) if np.isfinite(si) else fp.upper
+        # the CI is from the linearisation in the fit coordinate; clipping to the search bounds
+        # happens in from_x
+        out.ci95[fp.key] = [lo, hi]

@@ -1,0 +1,183 @@
+"""A measured record prepared for identification: columns checked against the robot, the split into
+estimation and validation data, the initial pose, and the data checks every later step relies on
+(sample rate, noise floor, end-stop contact, which joints are excited and measured).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..dataset import Dataset, DatasetError, input_matrix, read_csv
+from .metrics import fit_ceiling, noise_std
+
+ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
+MIN_SAMPLES = 50
+MIN_DURATION = 2.0          # s
+INITIAL_POSE_TOLERANCE = 0.1  # rad: further from the spec's pose, the record started elsewhere
+END_STOP_MARGIN = 0.01      # rad: closer to a joint limit counts as end-stop contact
+
+
+@dataclass
+class Record:
+    """One measured record on the robot's joints (time from 0)."""
+
+    source: str
+    time: np.ndarray                      # [N] s, starting at 0
+    U: np.ndarray                         # [N, n_act] commands (V), every actuated joint
+    angles: dict[str, np.ndarray]         # measured angle per sensed joint with a q_ column
+    pressures: dict[str, tuple[np.ndarray, np.ndarray]]  # (p_a, p_b) per joint with both columns
+    joint_names: list[str]
+    excited: list[str]                    # actuated joints whose command moves
+    initial_pose: dict[str, float]        # joint -> angle the simulation starts from
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return self.time.size
+
+    @property
+    def rate(self) -> float:
+        return 1.0 / float(np.median(np.diff(self.time)))
+
+    @property
+    def dt(self) -> float:
+        return float(np.median(np.diff(self.time)))
+
+    @property
+    def targets(self) -> list[str]:
+        """Joints that are both excited and measured: the ones a discrepancy can be named on."""
+        return [j for j in self.excited if j in self.angles]
+
+    @property
+    def has_pressures(self) -> bool:
+        return any(j in self.pressures for j in self.targets)
+
+    def u(self, joint: str) -> np.ndarray:
+        return self.U[:, self.joint_names.index(joint)]
+
+    def head(self, n: int) -> "Record":
+        """The first ``n`` samples (estimation part of a single record)."""
+        return Record(self.source, self.time[:n], self.U[:n], {k: v[:n] for k, v in self.angles.items()},
+                      {k: (a[:n], b[:n]) for k, (a, b) in self.pressures.items()}, self.joint_names,
+                      self.excited, self.initial_pose, self.notes)
+
+
+@dataclass
+class DataCheck:
+    """What the checks found, per measured joint (for the report and the decision thresholds)."""
+
+    rate: float
+    duration: float
+    irregular_sampling: float                  # max/median sample interval
+    noise: dict[str, float]                    # rad, white-noise estimate per measured joint
+    end_stop_share: dict[str, float]           # share of samples within END_STOP_MARGIN of a limit
+    command_saturation_share: dict[str, float]  # share of samples at the command range limits
+    initial_pose_source: dict[str, str]        # 'spec' or 'data'
+    fit_ceiling: dict[str, float]              # best angle fit a perfect model reaches (noise floor)
+
+    def to_dict(self) -> dict:
+        return {
+            "rate_hz": self.rate, "duration_s": self.duration, "irregular_sampling": self.irregular_sampling,
+            "noise_rad": self.noise, "end_stop_share": self.end_stop_share,
+            "command_saturation_share": self.command_saturation_share,
+            "initial_pose_source": self.initial_pose_source, "fit_ceiling": self.fit_ceiling,
+        }
+
+
+def load_record(path: str | Path, spec, *, initial_pose: str = "auto", label: str | None = None) -> Record:
+    """Read a dataset CSV and check it against ``spec``; errors name the column (and row)."""
+    ds = read_csv(path)
+    return record_from_dataset(ds, spec, source=label or str(path), initial_pose=initial_pose)
+
+
+def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "auto") -> Record:
+    where = f"{source}: "
+    U = input_matrix(ds, spec, where=where)   # checks time, u_ columns, ranges and unknown columns
+    if len(ds) < MIN_SAMPLES:
+        raise DatasetError(f"{where}{len(ds)} rows; identification needs at least {MIN_SAMPLES}")
+    t = ds.time - ds.time[0]
+    if t[-1] < MIN_DURATION:
+        raise DatasetError(f"{where}column 'time': the record lasts {t[-1]:g} s; identification needs at least {MIN_DURATION:g} s")
+    notes: list[str] = []
+    angles: dict[str, np.ndarray] = {}
+    for j in spec.joint_names:
+        col = f"q_{j}"
+        if col not in ds:
+            continue
+        if not spec.joint(j).sensed:
+            notes.append(f"column {col!r} ignored: joint {j} has no sensor in the {spec.name} model")
+            continue
+        angles[j] = ds[col].copy()
+    pressures: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for j in spec.joint_names:
+        a, b = f"p_{j}_a", f"p_{j}_b"
+        if a in ds and b in ds:
+            pressures[j] = (ds[a].copy(), ds[b].copy())
+        elif a in ds or b in ds:
+            notes.append(f"pressure of joint {j} ignored: needs both {a!r} and {b!r}")
+    if not angles:
+        sensed = [f"q_{j}" for j in spec.sensed_joints]
+        raise DatasetError(f"{where}no measured angle column; expected one of {', '.join(sensed)}")
+    excited = [j for a, j in enumerate(spec.joint_names) if np.ptp(U[:, a]) > 1e-6 or np.abs(U[:, a]).max() > 1e-6]
+    if not any(j in angles for j in excited):
+        if not excited:
+            raise DatasetError(f"{where}no joint is commanded: every u_<joint> column is zero or absent")
+        raise DatasetError(
+            f"{where}the commanded joint(s) {', '.join(excited)} have no measured angle column "
+            f"({', '.join('q_' + j for j in excited)})"
+        )
+    pose = _initial_pose(spec, angles, t, initial_pose, notes)
+    return Record(source, t, U, angles, pressures, list(spec.joint_names), excited, pose, notes)
+
+
+def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, float]:
+    """Where the simulation starts. 'spec': the robot's initial positions; 'data': the first measured
+    angles; 'auto': the spec's unless the record starts more than INITIAL_POSE_TOLERANCE away (then a
+    sensor offset could not be told from another start pose, and the data's pose is used)."""
+    if policy not in ("auto", "spec", "data"):
+        raise ValueError(f"--initial-pose {policy!r}: expected auto, spec or data")
+    pose: dict[str, float] = {}
+    head = max(3, int(np.searchsorted(t, 0.02)))
+    for j in spec.joint_names:
+        q_spec = float(spec.joint(j).settings["initial_position"])
+        pose[j] = q_spec
+        if j not in angles:
+            continue
+        q_meas = float(np.median(angles[j][:head]))
+        far = abs(q_meas - q_spec) > INITIAL_POSE_TOLERANCE
+        if policy == "data" or (policy == "auto" and far):
+            pose[j] = q_meas
+            if policy == "auto":
+                notes.append(
+                    f"{j}: the record starts at {q_meas:.3f} rad, {q_meas - q_spec:+.3f} rad from the model's initial "
+                    f"position; the simulation starts there (a sensor offset cannot be told from another start pose)"
+                )
+    return pose
+
+
+def check_record(rec: Record, spec) -> DataCheck:
+    """The checks before anything else (research note §4.0)."""
+    d = np.diff(rec.time)
+    tree = spec.tree
+    noise, stops, sat, src, ceiling = {}, {}, {}, {}, {}
+    for j, y in rec.angles.items():
+        noise[j] = noise_std(y)
+        i = tree.index(spec.joint(j).dof)
+        lo, hi = tree.lower[i], tree.upper[i]
+        near = np.zeros(y.size, dtype=bool)
+        if math.isfinite(lo):
+            near |= y < lo + END_STOP_MARGIN
+        if math.isfinite(hi):
+            near |= y > hi - END_STOP_MARGIN
+        stops[j] = float(near.mean())
+        src[j] = "spec" if rec.initial_pose[j] == spec.joint(j).settings["initial_position"] else "data"
+        ceiling[j] = fit_ceiling(y, noise[j])
+    for j in rec.excited:
+        lo, hi = spec.joint(j).command_range
+        u = rec.u(j)
+        sat[j] = float(np.mean((u <= lo + 1e-9) | (u >= hi - 1e-9)))
+    return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling)

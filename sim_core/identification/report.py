@@ -1,0 +1,370 @@
+"""The diagnosis report: ``diagnosis.json`` (the contract), ``report.html`` (plots and reasoning) and
+``extended.toml`` (the improved model as a parameter/effect file).
+
+Plots per diagnosed joint: measured vs baseline vs extended angle; the residuals with the segments
+that carry the named effect's evidence highlighted; residual autocorrelation and the input
+cross-correlations with their 99 % bands; the residual spectrum and the transfer estimate.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..effects import EFFECTS
+from .diagnosis import Diagnosis
+from .params_file import overrides, write_params
+from .residual_tests import autocorrelation
+from .signatures import segments
+
+# which parts of the record carry each effect's evidence (for highlighting)
+EVIDENCE = {
+    "deadband": "small commands", "hysteresis": "holds after motion", "leakage": "holds",
+    "delay": "steps and reversals", "spool_lag": "steps and reversals", "backlash": "reversals",
+    "coulomb_friction": "reversals", "joint_compliance": "after steps", "line_dynamics": "after steps",
+    "bulk_modulus": "after steps", "valve_asymmetry": "negative commands", "area_ratio": "negative commands",
+    "payload": "raising and lowering", "flow_saturation": "large commands", "sensor_offset": "everywhere",
+    "sensor_gain": "large angles",
+}
+
+
+def evidence_mask(effect: str, u: np.ndarray, y: np.ndarray, rate: float, params: dict) -> np.ndarray:
+    """Samples where ``effect`` shows (the highlighted spans of the residual plot)."""
+    n = u.size
+    m = np.zeros(n, dtype=bool)
+    kind = EVIDENCE.get(effect, "")
+    w = max(1, int(round(0.6 * rate)))
+    if kind == "small commands":
+        width = float(params.get("width", 1.0))
+        m = (np.abs(u) > 0) & (np.abs(u) <= max(1.6 * width, 0.5))
+    elif kind in ("holds", "holds after motion"):
+        m = np.abs(u) < 1e-9
+    elif kind in ("steps and reversals", "after steps"):
+        for k in np.flatnonzero(np.abs(np.diff(u)) > 1e-9) + 1:
+            m[k: k + w] = True
+    elif kind == "reversals":
+        su = np.sign(u)
+        last = 0.0
+        for k in range(n):
+            if su[k] != 0:
+                if last != 0 and su[k] != last:
+                    m[k: k + w] = True
+                last = su[k]
+    elif kind == "negative commands":
+        m = u < 0
+    elif kind == "large commands":
+        m = np.abs(u) >= 0.6 * np.max(np.abs(u))
+    elif kind == "raising and lowering":
+        m = np.abs(u) > 0
+    elif kind == "large angles":
+        m = np.abs(y) >= 0.5 * np.max(np.abs(y))
+    elif kind == "everywhere":
+        m[:] = True
+    return m
+
+
+def _spans(mask: np.ndarray, t: np.ndarray):
+    if not mask.any():
+        return []
+    d = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return [(t[a], t[min(b, t.size - 1)]) for a, b in zip(starts, stops)]
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def plots(d: Diagnosis, joint: str) -> dict[str, str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .metrics import velocity
+    from .residual_tests import spectrum
+
+    rec = d.validation
+    t = rec.time
+    y = rec.angles[joint]
+    yb = d.baseline_out.angles.get(joint)
+    ye = d.extended_out.angles.get(joint)
+    out = {}
+    t_val = t[d.split]
+    # 1. measured vs baseline vs extended
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    ax.plot(t, y, "k", lw=0.8, label="measured")
+    if yb is not None:
+        ax.plot(t, yb, color="tab:red", lw=0.8, label=f"baseline ({d.baseline_fits[joint]['angle']:.1f} %)")
+    if ye is not None and d.selected:
+        ax.plot(t, ye, color="tab:blue", lw=0.8, ls="--", label=f"extended ({d.extended_fits[joint]['angle']:.1f} %)")
+    ax.axvspan(t_val, t[-1], color="0.92", zorder=0, label="validation")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"{joint} angle (rad)")
+    ax.legend(loc="upper right", fontsize=8, ncol=4)
+    out["angles"] = _png(fig)
+    # 2. residuals with the evidence highlighted
+    fig, ax = plt.subplots(figsize=(10, 3.0))
+    if yb is not None:
+        ax.plot(t, y - yb, color="tab:red", lw=0.7, label="measured - baseline")
+    if ye is not None and d.selected:
+        ax.plot(t, y - ye, color="tab:blue", lw=0.7, label="measured - extended")
+    sel = [s for s in d.selected if s["joint"] in (joint, None)] or d.selected
+    if sel:
+        s = sel[0]
+        mask = evidence_mask(s["effect"], rec.u(joint), y, rec.rate, s["params"])
+        for a, b in _spans(mask, t)[:400]:
+            ax.axvspan(a, b, color="gold", alpha=0.3, lw=0)
+        ax.plot([], [], color="gold", alpha=0.5, lw=6, label=f"evidence of {s['effect']}: {EVIDENCE.get(s['effect'], '')}")
+    ax.axvline(t_val, color="0.5", lw=0.8, ls=":")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("angle residual (rad)")
+    ax.legend(loc="upper right", fontsize=8)
+    out["residuals"] = _png(fig)
+    # 3. autocorrelation and cross-correlations with bands
+    tests = d.tests
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.0))
+    for state, color in (("baseline", "tab:red"), ("extended", "tab:blue")):
+        tj = tests.get(state, {}).get(joint)
+        if not tj or (state == "extended" and not d.selected):
+            continue
+        w = velocity(y, rec.dt)[d.split:]
+        sim = yb if state == "baseline" else ye
+        r = w - velocity(sim, rec.dt)[d.split:]
+        dec = max(1, int(round(0.075 * rec.rate)))
+        acf = autocorrelation(r[::dec], 25)
+        axes[0].stem(np.arange(26) * dec / rec.rate, acf, linefmt=color, markerfmt=" ", basefmt=" ", label=state)
+        ind = tj["_independence"].get("u")
+        if ind:
+            axes[1].plot(ind["lags_s"], ind["r"], color=color, lw=0.9, label=f"{state}: R(r, u)")
+            axes[1].axhline(ind["band"], color=color, ls=":", lw=0.8)
+            axes[1].axhline(-ind["band"], color=color, ls=":", lw=0.8)
+        ind = tj["_independence"].get("|u|")
+        if ind:
+            axes[1].plot(ind["lags_s"], ind["r"], color=color, lw=0.7, ls="--", label=f"{state}: R(r, |u|)")
+    n_dec = max(1, (rec.n - d.split) // max(1, int(round(0.075 * rec.rate))))
+    b = 2.576 / math.sqrt(n_dec)
+    axes[0].axhspan(-b, b, color="0.9", zorder=0)
+    axes[0].set_title("velocity residual autocorrelation (99 % band)", fontsize=9)
+    axes[0].set_xlabel("lag (s)")
+    axes[1].set_title("cross-correlation with the input (99 % bands)", fontsize=9)
+    axes[1].set_xlabel("lag (s)")
+    for a in axes:
+        a.legend(fontsize=7)
+    out["correlation"] = _png(fig)
+    # 4. spectrum and ETFE
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.0))
+    for state, color in (("baseline", "tab:red"), ("extended", "tab:blue")):
+        tj = tests.get(state, {}).get(joint)
+        if not tj or (state == "extended" and not d.selected):
+            continue
+        f, p = tj["_spectrum"]
+        axes[0].semilogy(f, p, color=color, lw=0.8, label=state)
+        H = tj.get("_etfe")
+        if H:
+            ff = np.array(H["f"])
+            keep = (ff > 0) & (ff <= min(20.0, 0.45 * rec.rate))
+            axes[1].plot(ff[keep], np.array(H["mag_db"])[keep], color=color, lw=0.8, label=f"{state} |H| (dB)")
+    axes[0].set_title("velocity residual spectrum", fontsize=9)
+    axes[0].set_xlabel("Hz")
+    axes[1].set_title("measured / simulated velocity (transfer estimate)", fontsize=9)
+    axes[1].set_xlabel("Hz")
+    for a in axes:
+        a.legend(fontsize=7)
+    out["spectrum"] = _png(fig)
+    return out
+
+
+def _fmt(v, digits=4):
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return str(v)
+        return f"{v:.{digits}g}"
+    return html.escape(str(v))
+
+
+def html_report(d: Diagnosis, data: dict) -> str:
+    e = html.escape
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>HydroHIL diagnosis: {e(d.robot)}</title>",
+             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}table{border-collapse:collapse}"
+             "td,th{border:1px solid #ccc;padding:2px 6px;font-size:90%}th{background:#f4f4f4}.ok{color:#070}"
+             ".bad{color:#a00}img{max-width:100%}</style></head><body>"]
+    parts.append(f"<h1>Diagnosis of {e(d.record.source)} on {e(d.robot)}</h1>")
+    verdict = data["verdict"]
+    parts.append(f"<p><b>Verdict: {e(verdict)}</b> ({e(d.stopped)}).</p>")
+    if not d.selected:
+        parts.append("<p>No candidate extension improved the validation score by the threshold with identified "
+                     "parameters: the model explains the data to within what the data can show.</p>")
+    parts.append(f"<p>Validation: {e(d.validation.source)} from {d.validation.time[d.split]:.2f} s "
+                 f"({d.validation.n - d.split} samples). Gain = rise of the joint's score, the mean NRMSE fit of angle, "
+                 f"velocity and recorded pressures; accepted from max({data['decision']['threshold_points']:g} points, "
+                 f"{data['decision']['noise_factor']:g} x noise spread) with BIC improving and identified parameters.</p>")
+    # cause and gain
+    for s in d.selected:
+        eff = EFFECTS[s["effect"]]
+        where = f" on joint {s['joint']}" if s["joint"] else ""
+        parts.append(f"<h2>Cause: {e(s['effect'])}{e(where)}</h2><p>{e(eff.summary())}</p>")
+        parts.append(f"<p><i>{e(' '.join((eff.__doc__ or '').split()[len(eff.summary().split()):]))}</i></p>")
+        rows = "".join(f"<tr><td>{e(k)}</td><td>{_fmt(v)}</td><td>[{_fmt(s['ci95'][k][0])}, {_fmt(s['ci95'][k][1])}]</td>"
+                       f"<td>{_fmt(s['significance'].get(k))}</td></tr>" for k, v in s["params"].items())
+        parts.append("<table><tr><th>parameter</th><th>estimate</th><th>95 % interval</th><th>|est - none| / sigma</th></tr>"
+                     f"{rows}</table>")
+        gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
+        parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b> ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
+                     f"BIC change {_fmt(s['bic_delta'])}." + (" Refit of an effect the nominal model already has." if s["refit_of_nominal"] else "") + "</p>")
+        if "runner_up" in s:
+            ru = s["runner_up"]
+            parts.append(f"<p>Runner-up: {e(ru['effect'])}{' on ' + e(ru['joint']) if ru['joint'] else ''} "
+                         f"({ru['gain']:+.2f} points).")
+            if s.get("ambiguous"):
+                parts.append(f" <b class='bad'>Ambiguous</b>: the margin is under 20 %. What would decide: {e(s['decided_by'])}.")
+            parts.append("</p>")
+    # fits
+    parts.append("<h2>Fit on validation data (NRMSE %, angle)</h2><table><tr><th>joint</th><th>baseline</th>"
+                 "<th>extended</th><th>baseline score</th><th>extended score</th></tr>")
+    for j, f in d.baseline_fits.items():
+        fe = d.extended_fits[j]
+        parts.append(f"<tr><td>{e(j)}{'' if f.get('excited', True) else ' (not commanded)'}</td><td>{_fmt(f['angle'])}</td>"
+                     f"<td>{_fmt(fe['angle'])}</td><td>{_fmt(f.get('score'))}</td><td>{_fmt(fe.get('score'))}</td></tr>")
+    parts.append("</table>")
+    # plots
+    for j in d.record.targets:
+        if j not in d.validation.angles:
+            continue
+        p = plots(d, j)
+        parts.append(f"<h2>Joint {e(j)}: where the model is wrong</h2>")
+        for key, cap in (("angles", "measured, baseline and extended model (validation shaded)"),
+                         ("residuals", "angle residuals, with the effect's evidence highlighted"),
+                         ("correlation", "whiteness and independence tests"),
+                         ("spectrum", "residual spectrum and transfer estimate")):
+            parts.append(f"<figure><img src='data:image/png;base64,{p[key]}'><figcaption>{e(cap)}</figcaption></figure>")
+        tb = d.tests.get("baseline", {}).get(j)
+        te = d.tests.get("extended", {}).get(j)
+        if tb:
+            parts.append(f"<p>Ljung-Box Q (velocity residual, 20 lags): baseline {tb['ljung_box_Q']:.0f}"
+                         + (f", extended {te['ljung_box_Q']:.0f}" if te and d.selected else "") + ".</p>")
+        sig = data["signatures"].get(j, {})
+        rows = "".join(f"<tr><td>{e(k)}</td><td>{_fmt(v)}</td></tr>" for k, v in sig.items() if not isinstance(v, dict))
+        parts.append(f"<details><summary>signature statistics (screening)</summary><table>{rows}</table></details>")
+    # candidates
+    parts.append("<h2>All candidates</h2><table><tr><th>round</th><th>effect</th><th>joint</th><th>gain</th><th>BIC change</th>"
+                 "<th>parameters</th><th>verdict</th></tr>")
+    for c in data["candidates"]:
+        params = ", ".join(f"{k}={_fmt(v)}" for k, v in c["params"].items())
+        why = "accepted" if c["accepted"] else "; ".join(c["rejected_because"])
+        parts.append(f"<tr><td>{c['round']}</td><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td>"
+                     f"<td>{c['gain']:+.2f}</td><td>{_fmt(c['bic_delta'])}</td><td>{e(params)}</td>"
+                     f"<td class='{'ok' if c['accepted'] else ''}'>{e(why)}</td></tr>")
+    parts.append("</table>")
+    # data checks
+    parts.append("<h2>Data checks</h2><ul>")
+    chk = data["data"]
+    parts.append(f"<li>{chk['rate_hz']:.1f} Hz, {chk['duration_s']:.1f} s, diagnosed joints: {e(', '.join(chk['targets']))}, "
+                 f"pressures {'recorded' if chk['pressures'] else 'not recorded'}</li>")
+    for j, s in chk["noise_rad"].items():
+        parts.append(f"<li>{e(j)}: angle noise {s * 1e3:.3f} mrad, fit ceiling {chk['fit_ceiling'][j]:.1f} %, "
+                     f"end-stop contact {100 * chk['end_stop_share'][j]:.1f} %, start pose from {chk['initial_pose_source'][j]}</li>")
+    for n in chk["notes"]:
+        parts.append(f"<li>{e(n)}</li>")
+    cal = data["calibration"]
+    for k, v in cal["values"].items():
+        ci = cal["ci95"].get(k)
+        parts.append(f"<li>calibrated {e(k)} = {_fmt(v)}" + (f" [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "") + "</li>")
+    parts.append(f"<li>fast integrator substep for the candidate fits: {_fmt(d.numerics.get('substep'))} s "
+                 f"(checked on this record: {e(json.dumps(d.numerics.get('candidates', {})))})</li></ul>")
+    parts.append("</body></html>")
+    return "".join(parts)
+
+
+def extended_params(d: Diagnosis, configured_spec) -> dict:
+    """The extended model as a parameter/effect file relative to the robot's built-in spec."""
+    spec = configured_spec.copy()
+    for k, v in d.calibration["values"].items():
+        spec.set(k, d.extended_spec.get(k))
+    for s in d.selected:
+        inst = next(e for e in d.extended_spec.effects if e.name == s["effect"] and e.joint == s["joint"])
+        params = dict(inst.params)
+        params.update(s["params"])
+        spec.enable_effect(s["effect"], s["joint"], **params)
+    for j, src in d.check.initial_pose_source.items():
+        if src == "data":
+            spec.set(f"joints.{j}.initial_position", d.record.initial_pose[j])
+    data = overrides(spec)
+    data["diagnosis"] = {
+        "generated_by": "hydrohil diagnose", "source": d.record.source, "validation": d.validation.source,
+        "verdict": d.verdict,
+        "effects": [f"{s['effect']}" + (f"@{s['joint']}" if s["joint"] else "") for s in d.selected],
+        "baseline_fit": {j: f["angle"] for j, f in d.baseline_fits.items() if f.get("excited", True)},
+        "extended_fit": {j: f["angle"] for j, f in d.extended_fits.items() if f.get("excited", True)},
+    }
+    return data
+
+
+def write(d: Diagnosis, out_dir: str | Path, configured_spec, fmt: str = "html") -> dict[str, Path]:
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    data = d.to_json()
+    paths = {"json": out_dir / "diagnosis.json", "toml": out_dir / "extended.toml"}
+    paths["json"].write_text(json.dumps(_json_safe(data), indent=2))
+    write_params(paths["toml"], extended_params(d, configured_spec),
+                 header=f"Extended model from 'hydrohil diagnose' on {d.record.source}: {d.verdict}.\n"
+                        f"Use with: hydrohil simulate --robot {d.robot} --params extended.toml ...")
+    if fmt == "html":
+        paths["report"] = out_dir / "report.html"
+        paths["report"].write_text(html_report(d, data))
+    else:
+        paths["report"] = out_dir / "report.md"
+        paths["report"].write_text(markdown_report(d, data))
+    return paths
+
+
+def markdown_report(d: Diagnosis, data: dict) -> str:
+    lines = [f"# Diagnosis of {d.record.source} on {d.robot}", "", f"**Verdict: {data['verdict']}** ({d.stopped})", ""]
+    for s in d.selected:
+        lines.append(f"## {s['effect']}" + (f" on {s['joint']}" if s["joint"] else ""))
+        for k, v in s["params"].items():
+            lo, hi = s["ci95"][k]
+            lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
+        lines.append(f"- gain {s['gain']:+.2f} points")
+        if s.get("ambiguous"):
+            lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
+        lines.append("")
+    lines.append("| joint | baseline fit | extended fit |")
+    lines.append("|---|---|---|")
+    for j, f in d.baseline_fits.items():
+        lines.append(f"| {j} | {_fmt(f['angle'])} | {_fmt(d.extended_fits[j]['angle'])} |")
+    lines.append("")
+    lines.append("| round | effect | joint | gain | BIC change | verdict |")
+    lines.append("|---|---|---|---|---|---|")
+    for c in data["candidates"]:
+        why = "accepted" if c["accepted"] else "; ".join(c["rejected_because"])
+        lines.append(f"| {c['round']} | {c['effect']} | {c['joint'] or '-'} | {c['gain']:+.2f} | {_fmt(c['bic_delta'])} | {why} |")
+    return "\n".join(lines) + "\n"
+
+
+def _json_safe(v):
+    if isinstance(v, dict):
+        return {str(k): _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if math.isfinite(f) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return v
