@@ -3,6 +3,7 @@ CAN bridge, viewer plugins). REST routers and transports talk to this object onl
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import threading
 import time
@@ -62,6 +63,13 @@ class HilService:
             raise ServiceError(f"--rate {cfg.rate_hz}: must be between 1 and 20000 Hz")
         if cfg.mode not in S.MODES:
             raise ServiceError(f"--mode {cfg.mode!r}: one of {', '.join(S.MODES)}")
+        if cfg.can:
+            from .can.transports import check_spec
+
+            try:
+                check_spec(cfg.can)
+            except ValueError as exc:
+                raise ServiceError(f"--can {cfg.can}: {exc}") from None
         self.cfg = cfg
         spec = load_robot(cfg.robot)
         if cfg.params:
@@ -83,23 +91,48 @@ class HilService:
         self.recorder = Recorder(self.block, spec, Path(cfg.recordings_dir), self.engine)
         self.metrics = Metrics()
         self.bridge = None
+        self._can_loop: asyncio.AbstractEventLoop | None = None
+        self._can_thread: threading.Thread | None = None
         self.plugins: list = []
         self._pct_cache = (0.0, {})
         self._closed = False
 
     # ---- lifecycle -------------------------------------------------------------------------
     def start_transports(self) -> None:
+        """Start CAN (on an event-loop thread of its own) and viewer plugins: for embedding the
+        service without an event loop. ``hydrohil serve`` uses :meth:`start_transports_async`."""
         if self.cfg.can:
-            from .can.bridge import CanBridge
+            self._can_loop = asyncio.new_event_loop()
+            self._can_thread = threading.Thread(target=self._can_loop.run_forever, name="can-loop", daemon=True)
+            self._can_thread.start()
+            asyncio.run_coroutine_threadsafe(self._start_bridge(), self._can_loop).result(30)
+        self._start_viewers()
 
-            self.bridge = CanBridge(self, self.cfg.can)
-            self.bridge.start()
+    async def start_transports_async(self) -> None:
+        """Start CAN on the running loop (uvicorn's: CAN and REST share one thread, no GIL hand-offs)."""
+        if self.cfg.can:
+            await self._start_bridge()
+        self._start_viewers()
+
+    async def _start_bridge(self) -> None:
+        from .can.bridge import CanBridge
+
+        bridge = CanBridge(self, self.cfg.can)
+        await bridge.start()
+        self.bridge = bridge
+
+    def _start_viewers(self) -> None:
         if self.cfg.viewer_port:
             for ep in entry_points(group="hydrohil.viewers"):
                 try:
                     self.plugins.append(ep.load()(self, self.cfg.viewer_port))
                 except Exception as exc:  # the plant keeps running without its viewer
                     log.error("viewer plugin %s failed: %s", ep.name, exc)
+
+    async def close_transports_async(self) -> None:
+        if self.bridge is not None and self._can_loop is None:
+            bridge, self.bridge = self.bridge, None
+            await bridge.close()
 
     def close(self) -> None:
         if self._closed:
@@ -110,8 +143,14 @@ class HilService:
                 p.close()
             except Exception:  # noqa: BLE001
                 pass
-        if self.bridge is not None:
-            self.bridge.close()
+        if self.bridge is not None and self._can_loop is not None:
+            try:
+                asyncio.run_coroutine_threadsafe(self.bridge.close(), self._can_loop).result(5)
+            except Exception:  # noqa: BLE001
+                pass
+            self._can_loop.call_soon_threadsafe(self._can_loop.stop)
+            self._can_thread.join(5)
+        self.bridge = None
         try:
             self.recorder.close()
         finally:

@@ -214,7 +214,7 @@ def test_websocket_stream_at_the_chosen_rate(server, http):
         return msgs
 
     msgs = asyncio.run(collect(50, 2.0))
-    assert 80 <= len(msgs) <= 120
+    assert 60 <= len(msgs) <= 110      # paced at the chosen rate: never faster, and steady
     times = [m["time"] for m in msgs]
     assert all(b > a for a, b in zip(times, times[1:]))
 

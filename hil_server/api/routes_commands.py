@@ -3,43 +3,43 @@
 from fastapi import APIRouter, Depends
 
 from .deps import get_service, require_token
-from .schemas import ChannelWrite, CommandRequest, CommandResponse, EstopRequest
+from .schemas import ChannelWrite, CommandRequest, CommandResponse, EstopRequest, model_json
 
 router = APIRouter(tags=["commands"])
 
 
 @router.put("/api/v1/commands", response_model=CommandResponse, dependencies=[Depends(require_token)])
-def put_commands(body: CommandRequest, svc=Depends(get_service)):
+async def put_commands(body: CommandRequest, svc=Depends(get_service)):
     """Set command voltages (V) per joint. They hold until changed (no watchdog for REST commands)."""
-    return {"applied": svc.set_voltages(body.voltages), "estop": svc.estopped}
+    return model_json(CommandResponse, {"applied": svc.set_voltages(body.voltages), "estop": svc.estopped})
 
 
 @router.get("/api/v1/commands")
-def get_commands(svc=Depends(get_service)):
+async def get_commands(svc=Depends(get_service)):
     return {"voltages": svc.command_voltages(), "estop": svc.estopped}
 
 
 @router.post("/api/v1/commands/neutral", dependencies=[Depends(require_token)])
-def neutral(svc=Depends(get_service)):
+async def neutral(svc=Depends(get_service)):
     """Every valve to 0 V."""
     svc.neutral()
     return {"voltages": svc.command_voltages()}
 
 
 @router.get("/api/v1/estop")
-def get_estop(svc=Depends(get_service)):
+async def get_estop(svc=Depends(get_service)):
     return {"engaged": svc.estopped}
 
 
 @router.put("/api/v1/estop", dependencies=[Depends(require_token)])
-def put_estop(body: EstopRequest, svc=Depends(get_service)):
+async def put_estop(body: EstopRequest, svc=Depends(get_service)):
     """Engage: all valves neutral, commands zeroed, until released."""
     svc.set_estop(body.engaged)
     return {"engaged": svc.estopped}
 
 
 @router.get("/api/v1/cfp")
-def cfp_modules(svc=Depends(get_service)):
+async def cfp_modules(svc=Depends(get_service)):
     """The cFP view: modules, their channels (joint, role, direction) and current values (V)."""
     snap = svc.block.snapshot()
     cmd = svc.command_voltages()
@@ -49,7 +49,7 @@ def cfp_modules(svc=Depends(get_service)):
 
 
 @router.get("/api/v1/cfp/{module}/{channel}")
-def cfp_read(module: str, channel: str, svc=Depends(get_service)):
+async def cfp_read(module: str, channel: str, svc=Depends(get_service)):
     from ..service import ServiceError
 
     try:
@@ -61,6 +61,6 @@ def cfp_read(module: str, channel: str, svc=Depends(get_service)):
 
 
 @router.put("/api/v1/cfp/{module}/{channel}", dependencies=[Depends(require_token)])
-def cfp_write(module: str, channel: str, body: ChannelWrite, svc=Depends(get_service)):
+async def cfp_write(module: str, channel: str, body: ChannelWrite, svc=Depends(get_service)):
     """Write an analog output channel (amplifier input, 0..10 V) as a LabVIEW VI would."""
     return svc.write_channel(module, channel, body.value)

@@ -9,7 +9,7 @@ router = APIRouter(tags=["control"])
 
 
 @router.get("/api/v1/mode")
-def get_mode(svc=Depends(get_service)):
+async def get_mode(svc=Depends(get_service)):
     return {"mode": svc.health()["mode"]}
 
 

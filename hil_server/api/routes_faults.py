@@ -9,7 +9,7 @@ router = APIRouter(tags=["faults"])
 
 
 @router.get("/api/v1/faults")
-def list_faults(svc=Depends(get_service)):
+async def list_faults(svc=Depends(get_service)):
     return {"faults": list(svc.faults.values())}
 
 

@@ -9,13 +9,13 @@ router = APIRouter(tags=["parameters"])
 
 
 @router.get("/api/v1/parameters")
-def get_parameters(svc=Depends(get_service)):
+async def get_parameters(svc=Depends(get_service)):
     """Every parameter by path (e.g. joints.j2.valve.rated_flow) and the enabled effects."""
     return svc.parameters()
 
 
 @router.get("/api/v1/parameters/{path}")
-def get_parameter(path: str, svc=Depends(get_service)):
+async def get_parameter(path: str, svc=Depends(get_service)):
     from ..service import ServiceError
 
     values = svc.spec.parameters()
@@ -31,7 +31,7 @@ def patch_parameters(body: ParameterPatch, svc=Depends(get_service)):
 
 
 @router.get("/api/v1/effects")
-def get_effects(svc=Depends(get_service)):
+async def get_effects(svc=Depends(get_service)):
     return svc.effects()
 
 

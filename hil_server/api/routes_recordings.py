@@ -16,7 +16,7 @@ def _err(exc, status):
 
 
 @router.get("/api/v1/recordings")
-def list_recordings(svc=Depends(get_service)):
+async def list_recordings(svc=Depends(get_service)):
     return {"recordings": [r.describe() for r in svc.recorder.recordings.values()]}
 
 
@@ -39,7 +39,7 @@ def stop(svc=Depends(get_service)):
 
 
 @router.get("/api/v1/recordings/{rec_id}")
-def describe(rec_id: str, svc=Depends(get_service)):
+async def describe(rec_id: str, svc=Depends(get_service)):
     try:
         return svc.recorder.get(rec_id).describe()
     except KeyError as exc:

@@ -5,15 +5,15 @@ import asyncio
 from fastapi import APIRouter, Depends, Query, WebSocket, WebSocketDisconnect
 
 from .deps import get_service
-from .schemas import StateResponse
+from .schemas import StateResponse, model_json
 
 router = APIRouter(tags=["state"])
 
 
 @router.get("/api/v1/state", response_model=StateResponse)
-def state(svc=Depends(get_service)):
+async def state(svc=Depends(get_service)):
     """Simulated time, every joint's angle, sensor and command voltage, pressures, velocity, and loop statistics."""
-    return svc.state()
+    return model_json(StateResponse, svc.state())
 
 
 @router.websocket("/api/v1/stream")
@@ -26,7 +26,7 @@ async def stream(ws: WebSocket, rate: float = Query(30.0, ge=1.0, le=250.0, desc
     next_t = loop.time()
     try:
         while True:
-            await ws.send_json(svc.state())
+            await ws.send_text(StateResponse.model_validate(svc.state()).model_dump_json())
             next_t += period
             delay = next_t - loop.time()
             if delay < 0:

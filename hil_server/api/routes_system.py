@@ -5,19 +5,19 @@ from fastapi.responses import PlainTextResponse
 
 from ..engine import shared as S
 from .deps import get_service
-from .schemas import HealthResponse
+from .schemas import HealthResponse, model_json
 
 router = APIRouter(tags=["system"])
 
 
 @router.get("/api/v1/health", response_model=HealthResponse)
-def health(svc=Depends(get_service)):
+async def health(svc=Depends(get_service)):
     """Liveness, mode, and whether the loop got real-time priority (and why not)."""
-    return svc.health()
+    return model_json(HealthResponse, svc.health())
 
 
 @router.get("/metrics", response_class=PlainTextResponse)
-def metrics(svc=Depends(get_service)):
+async def metrics(svc=Depends(get_service)):
     """Prometheus text format: loop lateness histogram, overruns, HTTP requests, CAN frames."""
     st = svc.block.stats
     lines = [

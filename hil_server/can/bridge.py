@@ -1,20 +1,23 @@
 """CAN bridge: ValveCommand frames in, JointFeedback / JointPressure / HilStatus / Heartbeat / EMCY out.
 
-Receive thread: a command frame with the right DLC and an in-range voltage becomes the joint's
+Everything runs on one asyncio event loop (uvicorn's under ``hydrohil serve``): no CAN thread
+competes with the REST server for the GIL.
+
+Receive: a command frame with the right DLC and an in-range voltage becomes the joint's
 command (source CAN, so the engine's watchdog guards it); SYNC advances the plant one tick in
 lockstep mode and answers with feedback at once. Anything else (wrong DLC, unknown id, remote or
 error frames, out-of-range commands, frames beyond the flood budget) is counted and ignored; the
 plant runs in its own process, so a flood cannot slow its loop.
 
-Transmit thread: cyclic feedback at ``feedback_rate`` in realtime/fast modes (in lockstep and paused,
+Transmit task: cyclic feedback at ``feedback_rate`` in realtime/fast modes (in lockstep and paused,
 whenever a tick happened), status at 10 Hz, heartbeat at 1 Hz, and an EMCY when a watchdog trip
 or a fault starts (error code) or ends (0x0000).
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
-import threading
 import time
 
 import can
@@ -22,7 +25,7 @@ import numpy as np
 
 from ..engine import shared as S
 from . import dbc as D
-from .transports import open_bus
+from .transports import open_transport
 
 log = logging.getLogger("hydrohil.can")
 
@@ -54,37 +57,37 @@ class CanBridge:
         self.counters: dict[tuple[str, str], int] = {}
         self._clock = {"tokens": FLOOD_RATE, "t": time.monotonic()}
         self._fb_counter = 0
-        self._tx_lock = threading.Lock()
-        self._fb_lock = threading.Lock()   # one feedback burst per lockstep tick
-        self._stop = threading.Event()
         self._last_fb_tick = -1
         self._wd_prev = np.zeros(len(joints))
         self._faults_prev: set[str] = set()
         self._occurrence: dict[tuple, int] = {}
-        self.bus: can.BusABC | None = None
+        self.transport = None
+        self._tx_task: asyncio.Task | None = None
 
-    # ---- lifecycle ---------------------------------------------------------------------------
-    def start(self) -> None:
-        self.bus = open_bus(self.spec_str)
-        self._threads = [threading.Thread(target=self._rx_loop, name="can-rx", daemon=True),
-                         threading.Thread(target=self._tx_loop, name="can-tx", daemon=True)]
-        for t in self._threads:
-            t.start()
-        log.info("CAN on %s", getattr(self.bus, "channel_info", self.spec_str))
+    # ---- lifecycle (coroutines: run on the bridge's event loop) ---------------------------------
+    async def start(self) -> None:
+        self.transport = open_transport(self.spec_str)
+        await self.transport.start(self._handle_safe)
+        self._tx_task = asyncio.create_task(self._tx_loop())
+        log.info("CAN on %s", self.spec_str)
 
-    def close(self) -> None:
-        self._stop.set()
-        for t in getattr(self, "_threads", []):
-            t.join(2.0)
-        if self.bus is not None:
-            self.bus.shutdown()
+    async def close(self) -> None:
+        if self._tx_task is not None:
+            self._tx_task.cancel()
+            try:
+                await self._tx_task
+            except (asyncio.CancelledError, Exception):  # noqa: BLE001
+                pass
+        if self.transport is not None:
+            await self.transport.close()
 
     def describe(self) -> dict:
         d = {"transport": self.spec_str, "feedback_rate_hz": self.feedback_rate,
              "frames": {f"{k[0]}.{k[1]}": v for k, v in sorted(self.counters.items())}}
-        if hasattr(self.bus, "port"):
-            d["port"] = self.bus.port
-            d["clients"] = getattr(self.bus, "clients", None)
+        if self.transport is not None:
+            d.update(self.transport.describe())
+            for k, v in getattr(self.transport, "counters", {}).items():
+                d["frames"][f"transport.{k}"] = v
         return d
 
     def count(self, direction: str, kind: str, n: int = 1) -> None:
@@ -102,20 +105,12 @@ class CanBridge:
         c["tokens"] -= 1.0
         return True
 
-    def _rx_loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = self.bus.recv(timeout=0.1)
-            except (can.CanError, OSError, ValueError):
-                time.sleep(0.01)
-                continue
-            if msg is None:
-                continue
-            try:
-                self.handle(msg)
-            except Exception:  # noqa: BLE001 - a bad frame must never stop the bridge
-                self.count("rx", "malformed")
-                log.exception("frame %s", msg)
+    def _handle_safe(self, msg: can.Message) -> None:
+        try:
+            self.handle(msg)
+        except Exception:  # noqa: BLE001 - a bad frame must never stop the bridge
+            self.count("rx", "malformed")
+            log.exception("frame %s", msg)
 
     def handle(self, msg: can.Message) -> None:
         if not self._admit():
@@ -151,23 +146,26 @@ class CanBridge:
             self.count("rx", "sync")
             mode = S.MODES[int(self.service.block.state[S.S_MODE])]
             if mode == "lockstep":
-                with self._fb_lock:
-                    self.service.step(1)
-                    self.send_feedback()
+                self.service.step(1)
+                self.send_feedback()
             return
         self.count("rx", "unknown_id")
 
     # ---- transmit -----------------------------------------------------------------------------
+    def _frame(self, message, values: dict) -> can.Message:
+        return can.Message(arbitration_id=message.frame_id, data=message.encode(values, scaling=True, strict=False),
+                           is_extended_id=False, timestamp=time.time())
+
     def _send(self, message, values: dict, kind: str) -> None:
-        data = message.encode(values, scaling=True, strict=False)
-        frame = can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=False)
-        with self._tx_lock:
-            try:
-                self.bus.send(frame)
-            except (can.CanError, OSError):
-                self.count("tx", "failed")
-                return
-        self.count("tx", kind)
+        self._send_frames([self._frame(message, values)], kind)
+
+    def _send_frames(self, frames, kind: str) -> None:
+        try:
+            self.transport.send_many(frames)
+        except (can.CanError, OSError):
+            self.count("tx", "failed")
+            return
+        self.count("tx", kind, len(frames))
 
     def send_feedback(self) -> None:
         svc = self.service
@@ -179,6 +177,7 @@ class CanBridge:
         faulted = {f["joint"] for f in svc.faults.values()}
         self._fb_counter = (self._fb_counter + 1) & 0xFF
         tree = svc.spec.tree
+        frames = []
         for a, j in enumerate(self.joints):
             status = (D.STATUS_WATCHDOG if act[a, S.A_WATCHDOG] else 0) | (D.STATUS_FAULT if j in faulted else 0) \
                 | (D.STATUS_ESTOP if estop else 0) | (0 if self.sensed[a] else D.STATUS_NOT_SENSED)
@@ -190,14 +189,15 @@ class CanBridge:
             else:
                 fb = {"angle": NA_ANGLE * 1e-4, "sensor_voltage": NA_VOLT * 2e-4, "velocity": vel,
                       "status": status, "counter": self._fb_counter}
-            self._send(self.fb_msgs[a], fb, "feedback")
+            frames.append(self._frame(self.fb_msgs[a], fb))
             lo, hi = self.ranges[a]
-            self._send(self.pr_msgs[a], {
+            frames.append(self._frame(self.pr_msgs[a], {
                 "pressure_a": float(np.clip(act[a, S.A_P_A], 0.0, 65.5e6)),
                 "pressure_b": float(np.clip(act[a, S.A_P_B], 0.0, 65.5e6)),
                 "command_voltage": float(np.clip(act[a, S.A_U], lo, hi)),
                 "spool": float(np.clip(act[a, S.A_SPOOL], -1.28, 1.27)),
-                "counter": self._fb_counter}, "pressure")
+                "counter": self._fb_counter}))
+        self._send_frames(frames, "feedback")
         self._last_fb_tick = int(snap[S.S_TICK])
         self._check_events(act)
 
@@ -247,13 +247,12 @@ class CanBridge:
             self._emcy(D.EMCY_RESET, self.joints.index(j) if j in self.joints else None, D.FMI_BAD_DEVICE)
         self._faults_prev = faults
 
-    def _tx_loop(self) -> None:
+    async def _tx_loop(self) -> None:
         period = 1.0 / self.feedback_rate
-        next_fb = time.monotonic()
-        next_status = next_fb
-        next_hb = next_fb
-        while not self._stop.is_set():
-            now = time.monotonic()
+        loop = asyncio.get_running_loop()
+        next_fb = next_status = next_hb = loop.time()
+        while True:
+            now = loop.time()
             mode = S.MODES[int(self.service.block.state[S.S_MODE])]
             try:
                 if mode in ("realtime", "fast"):
@@ -262,12 +261,10 @@ class CanBridge:
                         next_fb += period
                         if now - next_fb > 0.5:
                             next_fb = now + period
+                elif int(self.service.block.state[S.S_TICK]) != self._last_fb_tick:
+                    self.send_feedback()   # lockstep/paused: once after every step (REST or SYNC)
                 else:
-                    with self._fb_lock:   # lockstep/paused: once after every step (REST or SYNC)
-                        if int(self.service.block.state[S.S_TICK]) != self._last_fb_tick:
-                            self.send_feedback()
-                        else:
-                            self._check_events()
+                    self._check_events()
                 if now >= next_status:
                     self.send_status()
                     next_status += 0.1
@@ -280,5 +277,5 @@ class CanBridge:
                         next_hb = now + 1.0
             except Exception:  # noqa: BLE001
                 log.exception("CAN transmit")
-            wait = min(next_fb if mode in ("realtime", "fast") else now + 0.002, next_status, next_hb) - time.monotonic()
-            self._stop.wait(max(0.0005, min(wait, 0.01)))
+            nxt = min(next_fb if mode in ("realtime", "fast") else now + 0.002, next_status, next_hb)
+            await asyncio.sleep(max(0.0005, min(nxt - loop.time(), 0.01)))

@@ -1,25 +1,28 @@
-"""A socketcand (linux-can) protocol server on TCP, as a python-can bus.
+"""A socketcand (linux-can) protocol server on TCP, on an asyncio event loop.
 
 Machines without kernel CAN (this one, CI) have no vcan; stock python-can clients in other
 processes connect with ``can.Bus(interface="socketcand", host="127.0.0.1", port=PORT,
-channel="vcan0")``. The server side is a :class:`can.BusABC`, so the bridge uses it like any other
-bus. Bus semantics: a frame sent by one client reaches the emulator and every other client (not
-itself, like SocketCAN without RECV_OWN_MSGS); frames the emulator sends reach every client.
+channel="vcan0")``. Bus semantics: a frame sent by one client reaches the emulator and every other
+client (not itself, like SocketCAN without RECV_OWN_MSGS); frames the emulator sends reach every
+client. Everything runs on one event loop (no thread per client): under ``hydrohil serve`` that is
+uvicorn's, so CAN and REST never fight over the GIL.
 
 Rawmode subset of the protocol, as the reference daemon (socketcand/src/state_raw.c) and
 python-can's client speak it: ``< hi >`` on connect; ``< open BUS >`` -> ``< ok >``;
 ``< rawmode >`` -> ``< ok >``; client frames ``< send ID DLC b0 b1 ... >`` (unpadded hex bytes);
 server frames ``< frame ID SEC.USEC DATA >`` (contiguous hex; 3 hex digits = 11-bit id, 8 = 29-bit).
 python-can compares each handshake reply with one ``recv(256)``, so frames to a client are queued
-and only sent after a short pause following its ``rawmode`` reply. Unparseable input is counted and skipped.
+and only sent after a short pause following its ``rawmode`` reply. python-can's client leaves Nagle
+on; we ACK every read at once (TCP_QUICKACK) so its second small frame of a tick is not held for our
+delayed ACK (40-200 ms). Unparseable input is counted and skipped; a client that cannot keep up has
+frames dropped (counted) rather than growing memory.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
-import queue
 import socket
-import threading
 import time
 
 import can
@@ -27,7 +30,7 @@ import can
 log = logging.getLogger("hydrohil.socketcand")
 
 HANDSHAKE_QUIET_S = 0.1
-CLIENT_QUEUE = 20000
+MAX_BUFFERED = 256 * 1024   # bytes queued in a client's transport before frames are dropped
 
 
 def format_frame(msg: can.Message) -> bytes:
@@ -53,99 +56,84 @@ def parse_send(body: str) -> can.Message:
 
 
 class _Client:
-    def __init__(self, server: "SocketcandServerBus", sock: socket.socket, addr):
+    def __init__(self, server: "SocketcandServer", reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
         self.server = server
-        self.sock = sock
-        self.addr = addr
+        self.reader = reader
+        self.writer = writer
         self.raw = False
-        self.raw_since = 0.0
-        self.out: queue.Queue = queue.Queue(CLIENT_QUEUE)
-        self.alive = True
-        self.dropped = 0
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.pending: list[bytes] = []   # frames held during the handshake pause
+        self.flushing = False
+        sock = writer.get_extra_info("socket")
+        self._sock = sock
         self._quickack = getattr(socket, "TCP_QUICKACK", None)
-        threading.Thread(target=self._reader, name=f"socketcand-rx-{addr}", daemon=True).start()
-        threading.Thread(target=self._writer, name=f"socketcand-tx-{addr}", daemon=True).start()
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
-    def control(self, text: str) -> None:
-        self.sock.sendall(text.encode("ascii"))
+    def write(self, data: bytes) -> None:
+        if self.writer.is_closing():
+            return
+        if self.writer.transport.get_write_buffer_size() > MAX_BUFFERED:
+            self.server.count("dropped_slow_client")
+            return
+        self.writer.write(data)
 
-    def enqueue(self, line: bytes) -> None:
+    def deliver(self, line: bytes) -> None:
         if not self.raw:
             return
-        try:
-            self.out.put_nowait(line)
-        except queue.Full:
-            self.dropped += 1
-            self.server.count("dropped_slow_client")
+        if self.flushing:
+            self.pending.append(line)
+        else:
+            self.write(line)
 
-    def _writer(self) -> None:
-        while self.alive and (not self.raw or time.monotonic() - self.raw_since < HANDSHAKE_QUIET_S):
-            time.sleep(0.01)  # frames queue up; sent once the handshake reply stands alone
-        while self.alive:
-            try:
-                line = self.out.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            batch = [line]
-            while len(batch) < 256:
-                try:
-                    batch.append(self.out.get_nowait())
-                except queue.Empty:
-                    break
-            try:
-                self.sock.sendall(b"".join(batch))
-            except OSError:
-                self.close()
-
-    def _reader(self) -> None:
+    async def run(self) -> None:
+        self.write(b"< hi >")
         buf = ""
         try:
-            self.control("< hi >")
-            while self.alive:
-                try:
-                    data = self.sock.recv(65536)
-                    if self._quickack is not None:
-                        # ACK at once: python-can's client leaves Nagle on, so its second small frame
-                        # of a tick would otherwise wait for our delayed ACK (40-200 ms per tick)
-                        self.sock.setsockopt(socket.IPPROTO_TCP, self._quickack, 1)
-                except OSError:
-                    break
+            while True:
+                data = await self.reader.read(65536)
                 if not data:
                     break
+                if self._quickack is not None and self._sock is not None:
+                    try:
+                        self._sock.setsockopt(socket.IPPROTO_TCP, self._quickack, 1)
+                    except OSError:
+                        pass
                 buf += data.decode("ascii", errors="replace")
+                pos = 0
                 while True:
-                    start = buf.find("<")
+                    start = buf.find("<", pos)
                     if start < 0:
-                        buf = ""
+                        pos = len(buf)
                         break
                     end = buf.find(">", start)
                     if end < 0:
-                        if len(buf) - start > 1024:  # garbage without a closing bracket
+                        if len(buf) - start > 1024:
                             self.server.count("malformed")
-                            buf = ""
+                            pos = len(buf)
                         else:
-                            buf = buf[start:]
+                            pos = start
                         break
                     self._handle(buf[start + 1:end].strip())
-                    buf = buf[end + 1:]
+                    pos = end + 1
+                buf = buf[pos:]
+        except (ConnectionError, asyncio.IncompleteReadError):
+            pass
         finally:
-            self.close()
+            self.server._drop(self)
+            self.writer.close()
 
     def _handle(self, body: str) -> None:
         if not self.raw:
             if body.startswith("open "):
                 name = body[5:].strip()
-                if name == self.server.channel:
-                    self.control("< ok >")
-                else:
-                    self.control(f"< error could not open bus '{name}' >")
+                self.write(b"< ok >" if name == self.server.channel else f"< error could not open bus '{name}' >".encode())
             elif body == "rawmode":
-                self.control("< ok >")
-                self.raw_since = time.monotonic()
+                self.write(b"< ok >")
                 self.raw = True
+                self.flushing = True
+                asyncio.get_running_loop().call_later(HANDSHAKE_QUIET_S, self._flush)
             elif body == "echo":
-                self.control("< echo >")
+                self.write(b"< echo >")
             else:
                 self.server.count("malformed")
             return
@@ -157,99 +145,69 @@ class _Client:
                 return
             self.server._from_client(self, msg)
         elif body == "echo":
-            self.control("< echo >")
+            self.write(b"< echo >")
         else:
             self.server.count("malformed")
 
-    def close(self) -> None:
-        if not self.alive:
-            return
-        self.alive = False
-        try:
-            self.sock.close()
-        except OSError:
-            pass
-        self.server._drop(self)
+    def _flush(self) -> None:
+        self.flushing = False
+        if self.pending:
+            self.write(b"".join(self.pending))
+            self.pending.clear()
 
 
-class SocketcandServerBus(can.BusABC):
-    """Server side of the socketcand protocol as a python-can bus (``interface`` 'socketcand-server')."""
+class SocketcandServer:
+    """Transport ``socketcand``: serves bus ``vcan0`` on ``host:port``."""
 
-    def __init__(self, channel: str = "vcan0", host: str = "127.0.0.1", port: int = 29536, **kwargs):
-        self.channel = channel
-        self.channel_info = f"socketcand server {host}:{port} bus {channel}"
-        self.host, self.port = host, port
-        self._rx: queue.Queue = queue.Queue(100000)
-        self._clients: list[_Client] = []
-        self._lock = threading.Lock()
+    def __init__(self, host: str = "127.0.0.1", port: int = 29536, channel: str = "vcan0"):
+        self.host, self.port, self.channel = host, port, channel
         self.counters: dict[str, int] = {}
-        self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self._listener.bind((host, port))
-        self._listener.listen(16)
-        self.port = self._listener.getsockname()[1]
-        self._open = True
-        threading.Thread(target=self._accept, name="socketcand-accept", daemon=True).start()
-        super().__init__(channel=channel, **kwargs)
+        self.clients: list[_Client] = []
+        self.on_frame = None
+        self._server: asyncio.AbstractServer | None = None
 
     def count(self, key: str, n: int = 1) -> None:
         self.counters[key] = self.counters.get(key, 0) + n
 
-    @property
-    def clients(self) -> int:
-        return len(self._clients)
+    async def start(self, on_frame) -> None:
+        self.on_frame = on_frame
+        self._server = await asyncio.start_server(self._accept, self.host, self.port, reuse_address=True)
+        self.port = self._server.sockets[0].getsockname()[1]
 
-    def _accept(self) -> None:
-        while self._open:
-            try:
-                sock, addr = self._listener.accept()
-            except OSError:
-                break
-            c = _Client(self, sock, addr)
-            with self._lock:
-                self._clients.append(c)
+    async def _accept(self, reader, writer) -> None:
+        c = _Client(self, reader, writer)
+        self.clients.append(c)
+        await c.run()
 
     def _drop(self, client: _Client) -> None:
-        with self._lock:
-            if client in self._clients:
-                self._clients.remove(client)
+        if client in self.clients:
+            self.clients.remove(client)
 
     def _from_client(self, client: _Client, msg: can.Message) -> None:
-        try:
-            self._rx.put_nowait(msg)
-        except queue.Full:
-            self.count("dropped_rx_full")
-        line = format_frame(msg)
-        with self._lock:
-            others = [c for c in self._clients if c is not client]
-        for c in others:
-            c.enqueue(line)
+        if len(self.clients) > 1:
+            line = format_frame(msg)
+            for c in self.clients:
+                if c is not client:
+                    c.deliver(line)
+        self.on_frame(msg)
 
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        line = format_frame(msg)
-        with self._lock:
-            clients = list(self._clients)
-        for c in clients:
-            c.enqueue(line)
+    def send(self, msg: can.Message) -> None:
+        self.send_many([msg])
 
-    def _recv_internal(self, timeout):
-        try:
-            if timeout is None:
-                return self._rx.get(), False
-            if timeout <= 0:
-                return self._rx.get_nowait(), False
-            return self._rx.get(timeout=timeout), False
-        except queue.Empty:
-            return None, False
+    def send_many(self, msgs) -> None:
+        data = b"".join(format_frame(m) for m in msgs)
+        for c in list(self.clients):
+            c.deliver(data)
 
-    def shutdown(self) -> None:
-        self._open = False
-        try:
-            self._listener.close()
-        except OSError:
-            pass
-        with self._lock:
-            clients = list(self._clients)
-        for c in clients:
-            c.close()
-        super().shutdown()
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            for c in list(self.clients):
+                c.writer.close()
+            try:
+                await asyncio.wait_for(self._server.wait_closed(), 2.0)
+            except (asyncio.TimeoutError, Exception):  # noqa: BLE001
+                pass
+
+    def describe(self) -> dict:
+        return {"port": self.port, "clients": len(self.clients), "bus": self.channel}

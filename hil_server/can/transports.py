@@ -7,47 +7,99 @@
 * ``socketcand[:port][@host]``  our socketcand-protocol TCP server, bus name 'vcan0', for stock
   python-can clients in other processes where there is no kernel CAN (default 127.0.0.1:29536)
 
-More kinds can be added with the ``hydrohil.can_transports`` entry-point group (a callable taking
-the argument string and returning a :class:`can.BusABC`).
+A transport delivers received frames to ``on_frame`` on the bridge's event loop and sends frames
+from it. python-can buses are wrapped with a :class:`can.Notifier` bound to that loop. More kinds
+can be added with the ``hydrohil.can_transports`` entry-point group (a callable taking the argument
+string and returning a transport, or a :class:`can.BusABC`).
 """
 
 from __future__ import annotations
 
+import asyncio
 from importlib.metadata import entry_points
 
 import can
 
 
-def _virtual(arg: str) -> can.BusABC:
-    return can.Bus(interface="virtual", channel=arg or "hydrohil", receive_own_messages=False)
+class PythonCanTransport:
+    """Any python-can bus as a transport."""
+
+    def __init__(self, bus: can.BusABC):
+        self.bus = bus
+        self._notifier: can.Notifier | None = None
+
+    async def start(self, on_frame) -> None:
+        loop = asyncio.get_running_loop()
+
+        class _Listener(can.Listener):
+            def on_message_received(self, msg):
+                on_frame(msg)
+
+        self._notifier = can.Notifier(self.bus, [_Listener()], timeout=0.1, loop=loop)
+
+    def send(self, msg: can.Message) -> None:
+        self.bus.send(msg)
+
+    def send_many(self, msgs) -> None:
+        for m in msgs:
+            self.bus.send(m)
+
+    async def close(self) -> None:
+        if self._notifier is not None:
+            self._notifier.stop()
+        self.bus.shutdown()
+
+    def describe(self) -> dict:
+        return {"bus": getattr(self.bus, "channel_info", str(self.bus))}
 
 
-def _socketcan(arg: str) -> can.BusABC:
-    return can.Bus(interface="socketcan", channel=arg or "vcan0")
+def _virtual(arg: str):
+    return PythonCanTransport(can.Bus(interface="virtual", channel=arg or "hydrohil", receive_own_messages=False))
 
 
-def _socketcand(arg: str) -> can.BusABC:
-    from .socketcand_server import SocketcandServerBus
+def _socketcan(arg: str):
+    return PythonCanTransport(can.Bus(interface="socketcan", channel=arg or "vcan0"))
+
+
+def _socketcand(arg: str):
+    from .socketcand_server import SocketcandServer
 
     port_s, _, host = arg.partition("@")
     try:
         port = int(port_s) if port_s else 29536
     except ValueError:
         raise ValueError(f"socketcand: port must be a number, got {port_s!r}") from None
-    return SocketcandServerBus(channel="vcan0", host=host or "127.0.0.1", port=port)
+    return SocketcandServer(host=host or "127.0.0.1", port=port)
 
 
 TRANSPORTS = {"virtual": _virtual, "socketcan": _socketcan, "socketcand": _socketcand}
 
 
-def open_bus(spec: str) -> can.BusABC:
-    kind, _, arg = spec.partition(":")
+def _factories() -> dict:
     factories = dict(TRANSPORTS)
     for ep in entry_points(group="hydrohil.can_transports"):
         factories[ep.name] = ep.load()
+    return factories
+
+
+def check_spec(spec: str) -> None:
+    """Raise ValueError naming the problem if ``spec`` names no known transport (checked at start-up)."""
+    kind, _, arg = spec.partition(":")
+    factories = _factories()
     if kind not in factories:
         raise ValueError(f"unknown CAN transport {kind!r}; transports: {', '.join(sorted(factories))}")
+    if kind == "socketcand":
+        port_s = arg.partition("@")[0]
+        if port_s and not (port_s.isdigit() and 0 <= int(port_s) < 65536):
+            raise ValueError(f"socketcand: port must be a number 0-65535, got {port_s!r}")
+
+
+def open_transport(spec: str):
+    check_spec(spec)
+    kind, _, arg = spec.partition(":")
+    factories = _factories()
     try:
-        return factories[kind](arg)
+        t = factories[kind](arg)
     except OSError as exc:
         raise OSError(f"CAN transport {spec!r} could not be opened: {exc}") from exc
+    return PythonCanTransport(t) if isinstance(t, can.BusABC) else t
