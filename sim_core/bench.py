@@ -101,9 +101,10 @@ def _reference(plant, t, U, horizon: float) -> dict:
     return chosen
 
 
-def run_bench(robots=None, duration: float = 10.0, reference: bool = True) -> dict:
+def run_bench(robots=None, duration: float = 10.0, reference: bool = True, plugins: bool = True) -> dict:
     robots = robots or ["hydrolek", "mars_nd", "harvester"]
     result = {name: bench_robot(name, duration=duration, reference=reference) for name in robots}
-    for ep in entry_points(group="hydrohil.benchmarks"):
-        result.update(ep.load()())
+    if plugins:
+        for ep in entry_points(group="hydrohil.benchmarks"):
+            result.update(ep.load()())
     return result

@@ -85,6 +85,20 @@ def test_schemathesis_finds_no_server_errors(tmp_path):
         s.stop()
 
 
+def test_without_realtime_priority_it_runs_and_says_so(tmp_path):
+    s = ServerProcess("--no-rt", robot="hydrolek", tmp_path=tmp_path)
+    try:
+        with s.client() as c:
+            h = c.get("/api/v1/health").json()
+            assert h["realtime_priority"] is False and "disabled" in h["realtime_note"]
+            t0 = c.get("/api/v1/state").json()["time"]
+            time.sleep(0.5)
+            assert c.get("/api/v1/state").json()["time"] > t0 + 0.3          # the plant runs anyway
+    finally:
+        s.stop()
+    assert "without real-time priority" in (s.recordings.parent / f"serve-{s.port}.log").read_text()
+
+
 @pytest.mark.parametrize("args,message", [
     (["--robot", "nope"], "unknown robot 'nope'"),
     (["--rate", "0"], "--rate 0"),
