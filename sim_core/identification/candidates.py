@@ -38,11 +38,18 @@ CONFUSIONS: dict[frozenset, str] = {
     frozenset({"flow_saturation", "valve_asymmetry"}): "large and small commands in both directions (saturation depends on |u|)",
     frozenset({"sensor_gain", "payload"}): "a static calibration of the angle sensor against an inclinometer",
     frozenset({"coulomb_friction", "payload"}): "chamber pressures while raising and lowering",
+    frozenset({"sensor_offset", "sensor_gain"}): "a record over a wider angle range, through zero (an offset is the same at every angle, a gain error grows with the angle)",
+    frozenset({"leakage", "valve_asymmetry"}): "holds at several loads (leakage drifts with the load pressure, an asymmetry only moves with the command)",
+    frozenset({"leakage", "area_ratio"}): "holds at several loads, or chamber pressures",
 }
+SAME_EFFECT = "records at other poses of the joints between them (which link carries it changes the lever)"
 DEFAULT_DECIDER = "a second record with a different excitation"
 
 
 def decider(a: str, b: str, have_pressures: bool) -> str:
+    """The measurement that would separate effect ``a`` from ``b``."""
+    if a == b:
+        return SAME_EFFECT
     text = CONFUSIONS.get(frozenset({a, b}), DEFAULT_DECIDER)
     if have_pressures and text.startswith(("chamber pressures", "pressures")):
         return DEFAULT_DECIDER + " (the recorded pressures did not separate them)"

@@ -24,7 +24,7 @@ from .calibration import calibrate, default_free
 from .candidates import bank, decider
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter
-from .record import DataCheck, Record, check_record
+from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
 from .selection import (AMBIGUITY, GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, free_list, model_with,
                         select)
@@ -91,15 +91,27 @@ class Diagnosis:
         }
 
 
-def _split(rec: Record, val: Record | None, targets: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
+MAX_ESTIMATION_SAMPLES = 24000   # longer records are fitted on their first 24000 samples (cost per fit)
+
+
+def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
+    """Estimation and validation problems: the first 60 % and the last 40 % of a single record, or the
+    whole record and the whole validation record."""
     if val is None:
-        n = int(round(rec.n * 0.6))
-        return (oe.Problem(rec, targets, n=n), oe.Problem(rec, targets, start=n), rec, n)
+        n = int(round(rec.n * ESTIMATION_SHARE))
+        n_est = min(n, MAX_ESTIMATION_SAMPLES)
+        if n_est < n:
+            notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of the {n} before the validation part")
+        return (oe.Problem(rec, targets, n=n_est), oe.Problem(rec, targets, start=n), rec, n)
     missing = [f"q_{j}" for j in targets if j not in val.angles]
     if missing:
         raise ValueError(f"--validation {val.source}: no column {', '.join(missing)} (the estimation record's measured, "
                          f"commanded joints)")
-    return oe.Problem(rec, targets), oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0
+    n_est = min(rec.n, MAX_ESTIMATION_SAMPLES)
+    if n_est < rec.n:
+        notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of {rec.source}")
+    return (oe.Problem(rec, targets, n=n_est),
+            oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0)
 
 
 def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
@@ -127,7 +139,7 @@ def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progr
     for j, share in check.end_stop_share.items():
         if share > 0.05:
             notes.append(f"{j}: {100 * share:.0f} % of the samples are within {0.01:g} rad of a joint limit (end-stop contact)")
-    est, vprob, vrec, split = _split(rec, val, targets)
+    est, vprob, vrec, split = _split(rec, val, targets, notes)
     m0 = model_spec(spec)
 
     # numerics for the many candidate fits, checked on this record

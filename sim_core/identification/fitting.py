@@ -13,7 +13,7 @@ import numpy as np
 from . import output_error as oe
 from .calibration import default_free
 from .metrics import noise_std
-from .parameters import FreeParameterError, free_parameter
+from .parameters import FreeParameterError, declared, free_parameter
 from .params_file import overrides, write_params
 from .record import Record
 from .simulation import Runner, choose_numerics, model_spec
@@ -21,18 +21,30 @@ from .simulation import Runner, choose_numerics, model_spec
 NOISE_DRAWS = 16
 
 
-def _check_keys(spec, keys: list[str]) -> None:
+def prepare_keys(spec, keys: list[str]) -> list[str]:
+    """Check the keys; an effect parameter of an effect the model lacks switches that effect on (at
+    its defaults, the fit's starting point). Returns the effects switched on."""
+    switched = []
     for k in keys:
         parts = k.split(".")
-        if parts[0] == "effects" and len(parts) in (3, 4):
+        if parts[0] == "effects":
+            declared(spec, k)                                  # a clear error for a bad key
             name = parts[1]
             joint = parts[2] if len(parts) == 4 else None
             if not any(e.name == name and e.joint == joint for e in spec.effects):
-                where = f":joint={joint}" if joint else ""
-                raise FreeParameterError(f"--free {k}: effect {name}{' on ' + joint if joint else ''} is not in the model; "
-                                         f"switch it on first (--effect {name}{where})")
-        if parts[-1] in ("noise", "bits"):
+                try:
+                    spec.enable_effect(name, joint)
+                except ValueError as exc:
+                    raise FreeParameterError(f"--free {k}: {exc}") from None
+                switched.append(f"{name}" + (f"@{joint}" if joint else ""))
+            continue
+        if len(parts) == 4 and parts[2] == "sensor" and parts[3] in ("noise", "bits", "range"):
             raise FreeParameterError(f"--free {k}: sensor noise and resolution are properties of the data, not fitted")
+        if len(parts) == 4 and parts[2] == "sensor" and parts[3] in ("A", "B"):
+            raise FreeParameterError(
+                f"--free {k}: the model converts and reads back with the same calibration, so A and B cancel; "
+                f"fit a calibration error with effects.sensor_gain.{parts[1]}.gain or effects.sensor_offset.{parts[1]}.offset")
+    return switched
 
 
 def channel_spread(prob: oe.Problem, out, noise: dict[str, float], pnoise: dict[str, float]) -> dict[str, dict[str, float]]:
@@ -73,7 +85,8 @@ def _fits(prob: oe.Problem, before, after, rec: Record) -> dict:
 def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = None, max_sims: int = 80,
             out: str | None = None) -> dict:
     keys = list(keys or default_free(spec, rec))
-    _check_keys(spec, keys)
+    spec = spec.copy()
+    switched = prepare_keys(spec, keys)
     m0 = model_spec(spec)
     free = [free_parameter(m0, k) for k in keys]      # validates every key (clear errors)
     targets = rec.targets
@@ -87,6 +100,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     after = accurate.simulate(final.spec)
     result = {
         "robot": spec.name, "source": rec.source, "simulations": res.sims + final.sims, "numerics": numerics,
+        "switched_on": switched,
         "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)},
     }
     if val is not None:

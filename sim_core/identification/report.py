@@ -21,9 +21,8 @@ from ..effects import EFFECTS
 from .diagnosis import Diagnosis
 from .params_file import overrides, write_params
 from .residual_tests import autocorrelation
-from .signatures import segments
 
-# which parts of the record carry each effect's evidence (for highlighting)
+# where each effect typically shows (the legend of the highlighted evidence)
 EVIDENCE = {
     "deadband": "small commands", "hysteresis": "holds after motion", "leakage": "holds",
     "delay": "steps and reversals", "spool_lag": "steps and reversals", "backlash": "reversals",
@@ -34,39 +33,21 @@ EVIDENCE = {
 }
 
 
-def evidence_mask(effect: str, u: np.ndarray, y: np.ndarray, rate: float, params: dict) -> np.ndarray:
-    """Samples where ``effect`` shows (the highlighted spans of the residual plot)."""
-    n = u.size
-    m = np.zeros(n, dtype=bool)
-    kind = EVIDENCE.get(effect, "")
-    w = max(1, int(round(0.6 * rate)))
-    if kind == "small commands":
-        width = float(params.get("width", 1.0))
-        m = (np.abs(u) > 0) & (np.abs(u) <= max(1.6 * width, 0.5))
-    elif kind in ("holds", "holds after motion"):
-        m = np.abs(u) < 1e-9
-    elif kind in ("steps and reversals", "after steps"):
-        for k in np.flatnonzero(np.abs(np.diff(u)) > 1e-9) + 1:
-            m[k: k + w] = True
-    elif kind == "reversals":
-        su = np.sign(u)
-        last = 0.0
-        for k in range(n):
-            if su[k] != 0:
-                if last != 0 and su[k] != last:
-                    m[k: k + w] = True
-                last = su[k]
-    elif kind == "negative commands":
-        m = u < 0
-    elif kind == "large commands":
-        m = np.abs(u) >= 0.6 * np.max(np.abs(u))
-    elif kind == "raising and lowering":
-        m = np.abs(u) > 0
-    elif kind == "large angles":
-        m = np.abs(y) >= 0.5 * np.max(np.abs(y))
-    elif kind == "everywhere":
-        m[:] = True
-    return m
+def evidence_mask(y_base: np.ndarray, y_ext: np.ndarray, rate: float, share: float = 0.4) -> np.ndarray:
+    """Samples where the extension changes the prediction most (angle or velocity): where the record
+    carries the named effect's evidence. Smoothed over 0.25 s; above ``share`` of the largest change."""
+    from scipy.ndimage import uniform_filter1d
+
+    from .metrics import velocity
+
+    w = max(1, int(round(0.25 * rate)))
+    mask = np.zeros(y_base.size, dtype=bool)
+    for a, b in ((y_base, y_ext), (velocity(y_base, 1.0 / rate), velocity(y_ext, 1.0 / rate))):
+        dlt = uniform_filter1d(np.abs(a - b), w)
+        top = float(dlt.max())
+        if top > 0:
+            mask |= dlt >= share * top
+    return mask
 
 
 def _spans(mask: np.ndarray, t: np.ndarray):
@@ -121,12 +102,13 @@ def plots(d: Diagnosis, joint: str) -> dict[str, str]:
     if ye is not None and d.selected:
         ax.plot(t, y - ye, color="tab:blue", lw=0.7, label="measured - extended")
     sel = [s for s in d.selected if s["joint"] in (joint, None)] or d.selected
-    if sel:
+    if sel and yb is not None and ye is not None:
         s = sel[0]
-        mask = evidence_mask(s["effect"], rec.u(joint), y, rec.rate, s["params"])
+        mask = evidence_mask(yb, ye, rec.rate)
         for a, b in _spans(mask, t)[:400]:
             ax.axvspan(a, b, color="gold", alpha=0.3, lw=0)
-        ax.plot([], [], color="gold", alpha=0.5, lw=6, label=f"evidence of {s['effect']}: {EVIDENCE.get(s['effect'], '')}")
+        ax.plot([], [], color="gold", alpha=0.5, lw=6,
+                label=f"evidence: where {s['effect']} changes the prediction most ({EVIDENCE.get(s['effect'], '')})")
     ax.axvline(t_val, color="0.5", lw=0.8, ls=":")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("angle residual (rad)")

@@ -1,0 +1,133 @@
+"""The pieces of the identification: metrics, residual tests, signatures, the candidate bank, the
+parameter file, and diagnose's handling of bad input (clear errors naming the column or option)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim_core.effects import EFFECTS
+from sim_core.identification.candidates import bank
+from sim_core.identification.metrics import fit_ceiling, noise_std, nrmse_fit
+from sim_core.identification.params_file import overrides
+from sim_core.identification.residual_tests import correlation_band, cross_correlation, ljung_box
+from sim_core.identification.signatures import joint_signatures
+
+
+def test_nrmse_fit_is_matlabs_compare_fit():
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    assert nrmse_fit(y, y) == 100.0
+    assert nrmse_fit(y, np.full(4, y.mean())) == pytest.approx(0.0)
+    yhat = y + np.array([0.5, -0.5, 0.5, -0.5])
+    # 100 (1 - ||y - yhat|| / ||y - mean||) = 100 (1 - 1 / sqrt(5))
+    assert nrmse_fit(y, yhat) == pytest.approx(100 * (1 - 1 / math.sqrt(5)))
+    assert nrmse_fit(y, -y) < 0
+
+
+def test_noise_floor_estimates():
+    rng = np.random.default_rng(1)
+    t = np.linspace(0, 60, 12001)
+    smooth = 0.3 * np.sin(0.5 * t) + 0.1 * np.clip(np.sin(0.13 * t) * 4, -1, 1)
+    y = smooth + rng.normal(0, 4e-4, t.size)
+    assert noise_std(y) == pytest.approx(4e-4, rel=0.1)
+    # the ceiling is the fit of the noise-free signal itself
+    assert fit_ceiling(y, 4e-4) == pytest.approx(nrmse_fit(y, smooth), abs=0.05)
+
+
+def test_whiteness_and_independence():
+    rng = np.random.default_rng(2)
+    e = rng.normal(size=5000)
+    q, p = ljung_box(e, 20)
+    assert p > 0.001
+    coloured = np.convolve(e, np.ones(20) / 20, mode="same")
+    assert ljung_box(coloured, 20)[1] < 1e-6
+    u = rng.normal(size=5000)
+    lags, r = cross_correlation(np.roll(u, 7) + 0.1 * e, u, 20)
+    assert lags[np.argmax(r)] == 7                       # the residual follows u by 7 samples
+    assert abs(r[lags == 0][0]) < correlation_band(e, u, 20)
+
+
+def test_signatures_name_a_deadband_and_a_sensor_offset():
+    """Synthetic joint: speed = k * dead_zone(u, 1 V); the model has no deadband."""
+    rate = 200.0
+    rng = np.random.default_rng(3)
+    levels = rng.choice([-5, -3, -1.5, 1.5, 3, 5, 0], size=120)
+    u = np.repeat(levels, 100).astype(float)
+    t = np.arange(u.size) / rate
+    dz = np.sign(u) * np.maximum(np.abs(u) - 1.0, 0)
+    y = np.cumsum(0.02 * dz) / rate
+    yhat = np.cumsum(0.02 * u * 0.8) / rate
+    sig = joint_signatures(t, y + rng.normal(0, 1e-4, t.size), yhat, u, 1e-4, rate)
+    assert sig["deadband_t"] > 4
+    assert sig["guesses"]["deadband"]["width"] == pytest.approx(1.0, rel=0.3)
+    off = joint_signatures(t, yhat + 0.02 + rng.normal(0, 1e-4, t.size), yhat, u, 1e-4, rate)
+    assert off["sensor_offset"] == pytest.approx(0.02, abs=1e-3)
+    assert off["sensor_R2"] > 0.99
+
+
+def test_bank_offers_every_applicable_effect(plants):
+    spec = plants("hydrolek").spec
+    names = {c.effect for c in bank(spec, ["j2"])}
+    assert names == set(EFFECTS)
+    rotary = {c.effect for c in bank(plants("harvester").spec, ["swing"]) if c.joint == "swing"}
+    assert "area_ratio" not in rotary and "leakage" in rotary
+    # an effect the nominal model has is refitted from its value: its null is that value
+    h = plants("harvester").spec
+    db = next(c for c in bank(h, ["boom"]) if c.effect == "deadband")
+    assert db.existing and db.free[0].null == pytest.approx(1.2)
+    for c in bank(spec, ["j2"]):
+        s = c.prepare(spec)                     # every candidate switches on with valid parameters
+        assert any(e.name == c.effect and e.joint == c.joint for e in s.effects)
+        for point in c.grid:
+            for fp, v in zip(c.free, point):
+                assert fp.lower <= v <= fp.upper
+
+
+def test_parameter_file_round_trip(plants):
+    base = plants("harvester").spec
+    spec = base.copy()
+    spec.set("joints.boom.valve.rated_flow", 2.6e-3)
+    spec.enable_effect("deadband", "boom", width=1.7)
+    spec.enable_effect("delay", "stick", delay=0.02)
+    spec.disable_effect("line_dynamics", "swing")
+    data = overrides(spec)
+    assert data["parameters"] == {"joints.boom.valve.rated_flow": 2.6e-3}
+    again = base.copy()
+    again.apply_overrides(data)
+    assert again.parameters() == spec.parameters()
+    assert {(e.name, e.joint, tuple(sorted(e.params.items()))) for e in again.effects} == \
+        {(e.name, e.joint, tuple(sorted(e.params.items()))) for e in spec.effects}
+
+
+def _write(path, header, rows):
+    path.write_text(",".join(header) + "\n" + "\n".join(",".join(str(v) for v in r) for r in rows) + "\n")
+
+
+@pytest.mark.parametrize("header,rows,needle", [
+    (["t", "u_j2", "q_j2"], [[i * 0.01, 1.0, 0.0] for i in range(400)], "missing column 'time'"),
+    (["time", "u_j2"], [[i * 0.01, 1.0] for i in range(400)], "no measured angle column"),
+    (["time", "u_j2", "q_j2", "q_j9"], [[i * 0.01, 1.0, 0.0, 0.0] for i in range(400)], "q_j9"),
+    (["time", "u_j2", "q_j2"], [[i * 0.01, 12.0, 0.0] for i in range(400)], "u_j2"),
+    (["time", "u_j2", "q_j2"], [[i * 0.01, 0.0, 0.0] for i in range(400)], "no joint is commanded"),
+    (["time", "u_j3", "q_j2"], [[i * 0.01, 1.0, 0.0] for i in range(400)], "q_j3"),
+    (["time", "u_j2", "q_j2"], [[i * 0.01, 1.0, 0.0] for i in range(20)], "rows"),
+    (["time", "u_j2", "q_j2"], [[0.001 * i, 1.0, 0.0] for i in range(400)], "lasts"),
+])
+def test_bad_records_give_clear_errors(cli, tmp_path, header, rows, needle):
+    csv = tmp_path / "bad.csv"
+    _write(csv, header, rows)
+    proc = cli("diagnose", "--robot", "hydrolek", csv, "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 2
+    assert "hydrohil diagnose: error:" in proc.stderr and needle in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_bad_options_give_clear_errors(cli, tmp_path):
+    csv = tmp_path / "ok.csv"
+    _write(csv, ["time", "u_j2", "q_j2"], [[i * 0.01, 1.0, -0.3] for i in range(400)])
+    proc = cli("diagnose", "--robot", "hydrolek", csv, "--report", tmp_path / "r", "--effects", "warp_drive")
+    assert proc.returncode == 2 and "warp_drive" in proc.stderr
+    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "missing.csv", "--report", tmp_path / "r")
+    assert proc.returncode == 2 and "no such file" in proc.stderr
+    proc = cli("diagnose", "--robot", "hydrolek", csv, "--validation", tmp_path / "missing.csv", "--report", tmp_path / "r")
+    assert proc.returncode == 2 and "missing.csv" in proc.stderr
