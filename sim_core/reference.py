@@ -27,6 +27,7 @@ from .effects.bulk_modulus import bulk_factor
 from .effects.coulomb_friction import friction_torque
 from .effects.deadband import dead_zone
 from .effects.hysteresis import play
+from .effects.leakage import chamber_leakage
 from .kernel.layout import *  # noqa: F403
 
 NA_STATES = 13  # I_A, I_B, X, V, XL, PA, PB, PHA, PHB, QHA, QHB, THA, OMA
@@ -136,16 +137,10 @@ def rhs(y, ueff, tree, DP, AP, GP, ws, dy):
         if AP[a, AP_F_BURST_KV] > 0.0:
             qva -= AP[a, AP_F_BURST_KV] * orifice(ua - p_t, tr)[0]
         q_supply += q_pa + q_pb
-        ci = AP[a, AP_LEAK_INT] if AP[a, AP_E_LEAK] != 0.0 else 0.0
-        ce = AP[a, AP_LEAK_EXT] if AP[a, AP_E_LEAK] != 0.0 else 0.0
-        lk_a = ci * (pa - pb) + (ce + AP[a, AP_F_LEAK_A]) * (pa - p_t)
-        lk_b = -ci * (pa - pb) + (ce + AP[a, AP_F_LEAK_B]) * (pb - p_t)
-        prel = AP[a, AP_RELIEF_P]
-        if prel > 0.0:
-            if pa > prel:
-                lk_a += AP[a, AP_RELIEF_K] * (pa - prel)
-            if pb > prel:
-                lk_b += AP[a, AP_RELIEF_K] * (pb - prel)
+        lk_a, lk_b, _, _ = chamber_leakage(
+            pa, pb, p_t, AP[a, AP_LEAK_INT] if AP[a, AP_E_LEAK] != 0.0 else 0.0,
+            AP[a, AP_LEAK_EXT] if AP[a, AP_E_LEAK] != 0.0 else 0.0, AP[a, AP_F_LEAK_A], AP[a, AP_F_LEAK_B],
+            AP[a, AP_RELIEF_P], AP[a, AP_RELIEF_K])
         beta = GP[GP_BETA]
         fa = bulk_factor(pa, GP[GP_E_BULK], GP[GP_BULK_SCALE], GP[GP_BULK_PAIR], GP[GP_P_ATM])
         fb = bulk_factor(pb, GP[GP_E_BULK], GP[GP_BULK_SCALE], GP[GP_BULK_PAIR], GP[GP_P_ATM])

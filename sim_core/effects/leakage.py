@@ -1,3 +1,5 @@
+from numba import njit
+
 from ..components.base import Parameter
 from ..kernel import layout as L
 from .base import CITE_CATALOG, Effect
@@ -24,3 +26,22 @@ class Leakage(Effect):
         lw.AP[a, L.AP_E_LEAK] = 1.0
         lw.AP[a, L.AP_LEAK_INT] = params["internal"]
         lw.AP[a, L.AP_LEAK_EXT] = params["external"]
+
+
+@njit(cache=True, inline="always")
+def chamber_leakage(pa, pb, p_t, c_int, c_ext, c_fault_a, c_fault_b, p_relief, k_relief):
+    """Flows leaving chambers A and B (m^3/s) and their slopes d/dp_own: cross-port leakage A->B,
+    external leakage and fault leaks to tank, and port reliefs above ``p_relief`` (0 = none)."""
+    q_int = c_int * (pa - pb)
+    lk_a = q_int + (c_ext + c_fault_a) * (pa - p_t)
+    lk_b = -q_int + (c_ext + c_fault_b) * (pb - p_t)
+    dlk_a = c_int + c_ext + c_fault_a
+    dlk_b = c_int + c_ext + c_fault_b
+    if p_relief > 0.0:
+        if pa > p_relief:
+            lk_a += k_relief * (pa - p_relief)
+            dlk_a += k_relief
+        if pb > p_relief:
+            lk_b += k_relief * (pb - p_relief)
+            dlk_b += k_relief
+    return lk_a, lk_b, dlk_a, dlk_b

@@ -37,6 +37,7 @@ from ..effects.bulk_modulus import bulk_factor
 from ..effects.coulomb_friction import friction_torque
 from ..effects.deadband import dead_zone
 from ..effects.hysteresis import play
+from ..effects.leakage import chamber_leakage
 from .layout import *  # noqa: F403 - column constants (compile-time)
 
 _NJ = dict(cache=True, nogil=True)
@@ -410,27 +411,10 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             qva -= AP[a, AP_F_BURST_KV] * fb
             dqva -= AP[a, AP_F_BURST_KV] * db
         # --- leakage (chambers): internal A->B, external and fault leaks to tank, port reliefs
-        ci = AP[a, AP_LEAK_INT] if AP[a, AP_E_LEAK] != 0.0 else 0.0
-        ce = AP[a, AP_LEAK_EXT] if AP[a, AP_E_LEAK] != 0.0 else 0.0
-        cla = ce + AP[a, AP_F_LEAK_A]
-        clb = ce + AP[a, AP_F_LEAK_B]
-        q_int = ci * (pa - pb)
-        lk_a = q_int + cla * (pa - p_t)
-        lk_b = -q_int + clb * (pb - p_t)
-        dlk_a = ci + cla
-        dlk_b = ci + clb
-        prel = AP[a, AP_RELIEF_P]
-        rel_a = 0.0
-        rel_b = 0.0
-        if prel > 0.0:
-            if pa > prel:
-                rel_a = AP[a, AP_RELIEF_K] * (pa - prel)
-                lk_a += rel_a
-                dlk_a += AP[a, AP_RELIEF_K]
-            if pb > prel:
-                rel_b = AP[a, AP_RELIEF_K] * (pb - prel)
-                lk_b += rel_b
-                dlk_b += AP[a, AP_RELIEF_K]
+        lk_a, lk_b, dlk_a, dlk_b = chamber_leakage(
+            pa, pb, p_t, AP[a, AP_LEAK_INT] if AP[a, AP_E_LEAK] != 0.0 else 0.0,
+            AP[a, AP_LEAK_EXT] if AP[a, AP_E_LEAK] != 0.0 else 0.0, AP[a, AP_F_LEAK_A], AP[a, AP_F_LEAK_B],
+            AP[a, AP_RELIEF_P], AP[a, AP_RELIEF_K])
         # --- capacitances
         beta_h = AP[a, AP_HOSE_BETA]
         fa = bulk_factor(pa, bulk_on, bulk_s, bulk_pa, p_atm)
@@ -553,6 +537,19 @@ def _substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             XS[a, XS_Y_BACK] = q[int(AP[a, AP_DOF])]
 
 
+@njit(inline="always", **_NJ)
+def _copy_state(XQ, XS, XG, dq, ds, dg):
+    """Copy the state arrays into (dq, ds, dg); no allocation."""
+    for i in range(XQ.shape[1]):
+        dq[0, i] = XQ[0, i]
+        dq[1, i] = XQ[1, i]
+    for a in range(XS.shape[0]):
+        for c in range(XS.shape[1]):
+            ds[a, c] = XS[a, c]
+    for c in range(XG.shape[0]):
+        dg[c] = XG[c]
+
+
 @njit(**_NJ)
 def _state_ok(XQ, XS, XG):
     for i in range(XQ.shape[1]):
@@ -582,14 +579,7 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, backup, Yt, Y
     wsk = ws[:25]
     for k in range(n_out):
         dt = dts[k]
-        for i in range(XQ.shape[1]):
-            bq[0, i] = XQ[0, i]
-            bq[1, i] = XQ[1, i]
-        for a in range(na):
-            for c in range(XS.shape[1]):
-                bs[a, c] = XS[a, c]
-        for c in range(XG.shape[0]):
-            bg[c] = XG[c]
+        _copy_state(XQ, XS, XG, bq, bs, bg)
         t = XG[XG_TIME]
         cnt = int(XG[XG_HIST_COUNT])
         slot = cnt % cap
@@ -615,14 +605,7 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, backup, Yt, Y
             XG[XG_STEPS] += 1.0
         XG[XG_TIME] = t + dt
         if not _state_ok(XQ, XS, XG):
-            for i in range(XQ.shape[1]):
-                XQ[0, i] = bq[0, i]
-                XQ[1, i] = bq[1, i]
-            for a in range(na):
-                for c in range(XS.shape[1]):
-                    XS[a, c] = bs[a, c]
-            for c in range(XG.shape[0]):
-                XG[c] = bg[c]
+            _copy_state(bq, bs, bg, XQ, XS, XG)   # roll back to the last good state
             XG[XG_ERROR] = ERR_NAN
             return k
         Yt[k] = XG[XG_TIME]
