@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from sim_core.kernel import layout as KL
 from sim_core.simulator import SimulationError
 
 from . import shared as S
+from .tick_io import apply_commands, publish, record_row
 
 SPIN_S = 200e-6
 RESYNC_S = 1.0
@@ -43,7 +43,8 @@ class EngineLoop:
         self._u = np.zeros(na)
         self._wd = np.zeros(na)
         self._sensed = np.array([j.sensed for j in ctx.spec.joints])
-        self._sensed_idx = np.flatnonzero(self._sensed)
+        self._sensed_idx = np.flatnonzero(self._sensed).astype(np.int64)
+        self._n_dof = ctx.XQ.shape[1]
         self.tick_count = 0
         self._thresholds = np.array(S.LATENESS_BUCKETS_US) * 1e-6
         self._work = np.zeros(4096)
@@ -53,84 +54,39 @@ class EngineLoop:
         self.block.state[S.S_MODE] = S.MODES.index(mode)
         self.block.stats[S.T_RATE] = 1.0 / dt
         self.handlers = None  # set by the process (control message handlers)
+        self._ctl_seen = 0.0
         self._publish()
 
     # ---- one tick -------------------------------------------------------------------------------
     def _read_commands(self) -> None:
         b = self.block
-        if not S.SharedBlock.read(b.cmd_seq, b.cmd, self._cmd):
-            pass  # a writer is stuck mid-update: keep last commands
-        np.copyto(self._u, self._cmd[:, S.C_VOLT])
-        can = self._cmd[:, S.C_SOURCE] == S.SRC_CAN
-        if self.watchdog_s > 0.0 and can.any():
-            if self.mode == "realtime":
-                age = time.monotonic() - self._cmd[:, S.C_T_WALL]
-            else:
-                age = self.ctx.time - self._cmd[:, S.C_T_SIM]
-            tripped = can & (age > self.watchdog_s)
-            new_trips = int(np.count_nonzero(tripped & (self._wd == 0.0)))
-            if new_trips:
-                b.stats[S.T_WD_TRIPS] += new_trips
-            self._wd[:] = tripped
-            self._u[tripped] = 0.0
-        else:
-            self._wd[:] = 0.0
-        if b.estop[0] != 0.0:
-            self._u[:] = 0.0
+        S.SharedBlock.read(b.cmd_seq, b.cmd, self._cmd)   # a writer stuck mid-update: keep last commands
+        trips = apply_commands(self._cmd, self._u, self._wd, float(b.estop[0]), self.mode == "realtime",
+                               time.monotonic(), self.ctx.time, self.watchdog_s)
+        if trips:
+            b.stats[S.T_WD_TRIPS] += trips
 
     def tick(self) -> None:
         self._read_commands()
         try:
-            row = self.sim.step(self._u, self.dt)
+            self.sim.step(self._u, self.dt)
         except SimulationError:
-            # the state is rolled back by the simulator; hold it and report (never NaN in the state)
-            row = None
+            pass  # the simulator rolled the state back; hold it (never NaN in the state)
         self.tick_count += 1
-        self._publish(row)
+        self._publish()
         if self.recording:
-            self._record(row)
+            self._record()
 
-    def _publish(self, row=None) -> None:
-        b = self.block
+    def _publish(self) -> None:
         ctx = self.ctx
-        st = b.state
-        st[S.S_SEQ] += 1.0
-        st[S.S_TICK] = self.tick_count
-        st[S.S_TIME] = ctx.time
-        st[S.S_WALL] = time.time()
-        st[S.S_MODE] = S.MODES.index(self.mode)
-        st[S.S_ESTOP] = b.estop[0]
-        st[S.S_P_SUPPLY] = ctx.XG[KL.XG_P_S]
-        st[S.S_ALIVE] = 1.0
-        np.copyto(b.q, ctx.XQ[0])
-        np.copyto(b.qd, ctx.XQ[1])
-        act = b.act
-        act[:, S.A_U_REQ] = self._cmd[:, S.C_VOLT]
-        act[:, S.A_U] = self._u
-        act[:, S.A_SOURCE] = self._cmd[:, S.C_SOURCE]
-        act[:, S.A_WATCHDOG] = self._wd
-        XS = ctx.XS
-        act[:, S.A_SENS_V] = XS[:, KL.XS_SENS_V]
-        act[:, S.A_ANGLE] = XS[:, KL.XS_SENS_ANGLE]
-        act[:, S.A_P_A] = XS[:, KL.XS_P_A]
-        act[:, S.A_P_B] = XS[:, KL.XS_P_B]
-        act[:, S.A_SPOOL] = XS[:, KL.XS_SPOOL_X]
-        st[S.S_SEQ] += 1.0
+        publish(self.block.state, self._n_dof, ctx.XQ, ctx.XS, ctx.XG, self._cmd, self._u, self._wd,
+                float(self.tick_count), time.time(), float(S.MODES.index(self.mode)), float(self.block.estop[0]))
 
-    def _record(self, row) -> None:
+    def _record(self) -> None:
         b = self.block
         rows = int(b.rec_hdr[S.R_ROWS])
-        cap = b.rec.shape[0]
-        r = b.rec[rows % cap]
-        na = self._u.shape[0]
-        ns = self._sensed_idx.shape[0]
-        XS = self.ctx.XS
-        r[0] = self.ctx.time
-        r[1:1 + na] = self._u
-        r[1 + na:1 + na + ns] = XS[self._sensed_idx, KL.XS_SENS_ANGLE]
-        r[1 + na + ns:1 + 2 * na + ns] = XS[:, KL.XS_P_A]
-        r[1 + 2 * na + ns:1 + 3 * na + ns] = XS[:, KL.XS_P_B]
-        r[-1] = self.tick_count
+        record_row(b.rec[rows % b.rec.shape[0]], self.ctx.XS, self.ctx.XG, self._u, self._sensed_idx,
+                   float(self.tick_count))
         b.rec_hdr[S.R_ROWS] = rows + 1
 
     # ---- statistics ---------------------------------------------------------------------------
@@ -181,8 +137,10 @@ class EngineLoop:
             if clock() - deadline > RESYNC_S:
                 self.block.stats[S.T_RESYNCS] += 1.0
                 deadline = clock() + dt
-            if self.conn.poll():
-                self._poll(0.0)
+            if self.block.ctl[0] != self._ctl_seen:   # a request is waiting: no syscall per tick
+                self._ctl_seen = self.block.ctl[0]
+                while self.conn.poll():
+                    self._poll(0.0)
 
     def _poll(self, timeout: float) -> None:
         if self.conn.poll(timeout):

@@ -199,6 +199,7 @@ class EngineClient:
 
     def __init__(self, spec, cfg: EngineConfig, layout: S.Layout, block: S.SharedBlock, start_timeout: float = 120.0):
         self.cfg = cfg
+        self.block = block
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._lock = threading.Lock()
@@ -223,6 +224,7 @@ class EngineClient:
             if not self.process.is_alive():
                 raise RuntimeError("engine process is not running")
             self._conn.send((op, args))
+            self.block.ctl[0] += 1.0   # tells the realtime loop to look at the pipe
             if not self._conn.poll(timeout):
                 raise TimeoutError(f"engine did not answer {op!r} within {timeout} s")
             kind, payload = self._conn.recv()

@@ -50,6 +50,7 @@ class Layout:
             "cmd_seq": 1,
             "cmd": self.n_act * C_N,
             "estop": 1,
+            "ctl": 1,
             "state": S_HDR + 2 * self.n_dof + self.n_act * A_N,
             "stats": T_N + len(LATENESS_BUCKETS_US) + 1 + 1,
             "ring": LATENESS_RING,
@@ -80,6 +81,7 @@ class SharedBlock:
         self.cmd_seq = views["cmd_seq"]
         self.cmd = views["cmd"].reshape(layout.n_act, C_N)
         self.estop = views["estop"]
+        self.ctl = views["ctl"]      # bumped by the service before each control request
         self.state = views["state"]
         self.stats = views["stats"]
         self.ring = views["ring"]
@@ -130,7 +132,7 @@ class SharedBlock:
 
     def close(self) -> None:
         # drop numpy views before closing the mapping
-        for attr in ("cmd_seq", "cmd", "estop", "state", "stats", "ring", "rec_hdr", "rec", "q", "qd", "act", "buckets", "_buf"):
+        for attr in ("cmd_seq", "cmd", "estop", "ctl", "state", "stats", "ring", "rec_hdr", "rec", "q", "qd", "act", "buckets", "_buf"):
             setattr(self, attr, None)
         self._shm.close()
         if self.owner:
