@@ -94,20 +94,23 @@ class OperatorPanel:
                 b.on_click(self._neutral_cb(j))
         with tabs.add_tab("Plots", icon="chart-line"):
             self.plot_joint = gui.add_dropdown("joint", options=self.joints, initial_value=self.joints[0])
+            # A strip chart: x is plant time relative to the newest sample, on a fixed [-10 s, 0] axis.
+            # (With an auto x axis viser keeps the window relative to the data, and a plot that is
+            # updated while its tab is hidden can end up looking at an old window.)
             empty = (np.zeros(0), np.zeros(0), np.zeros(0))
             v_lo = min(r[0] for r in self.ranges.values())
             v_hi = max(r[1] for r in self.ranges.values())
             self.plot_command = gui.add_uplot(
-                empty, series=({"label": "t (s)"},
+                empty, series=({"label": "t − now (s)"},
                                {"label": "requested (V)", "stroke": "#1f77b4", "width": 1.5, "scale": "V"},
                                {"label": "applied (V)", "stroke": "#d62728", "width": 1.5, "scale": "V"}),
-                title="command (V)", scales={"x": {"time": False}, "V": {"auto": False, "range": [v_lo, v_hi]}},
+                title="command (V)", scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}, "V": {"auto": False, "range": [v_lo, v_hi]}},
                 axes=({}, {"scale": "V", "size": 50}), aspect=2.0)
             self.plot_angle = gui.add_uplot(
-                empty, series=({"label": "t (s)"},
+                empty, series=({"label": "t − now (s)"},
                                {"label": "measured (°)", "stroke": "#2ca02c", "width": 1.5, "scale": "deg"},
                                {"label": "true (°)", "stroke": "#555555", "width": 1.0, "scale": "deg"}),
-                title="angle (°)", scales={"x": {"time": False}, "deg": {"auto": True}},
+                title="angle (°)", scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}, "deg": {"auto": True}},
                 axes=({}, {"scale": "deg", "size": 50}), aspect=2.0)
             self.plot_joint.on_update(lambda _ev: self._update_plots(force=True))
         with tabs.add_tab("Health", icon="heart-rate-monitor"):
@@ -274,6 +277,8 @@ class OperatorPanel:
             return
         self._last_plot = now
         t, v = self.history.series(self.plot_joint.value)
+        if t.size:
+            t = t - t[-1]
         self.plot_command.data = (t, v[0], v[1])
         self.plot_angle.data = (t, np.degrees(v[2]), np.degrees(v[3]))
 

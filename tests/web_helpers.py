@@ -1,0 +1,322 @@
+"""Real parts for the browser-monitor tests: an in-process HydroHIL server (HilService + uvicorn +
+the viewer plugin loaded through its entry point), a websocket probe that reads what viser sends
+to a browser, headless Chromium, and screenshot arithmetic."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+ARTIFACTS = ROOT / "artifacts"
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--no-first-run"]
+VIEWPORT = {"width": 1280, "height": 800}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def artifacts_dir() -> Path:
+    d = ARTIFACTS / "browser"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def wait_for(pred, timeout: float, what: str, interval: float = 0.05):
+    end = time.monotonic() + timeout
+    while True:
+        v = pred()
+        if v:
+            return v
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(interval)
+
+
+# ---- servers ----------------------------------------------------------------------------------------
+class InProcessServer:
+    """HilService + real uvicorn in a thread; ``start_transports`` loads the viewer plugin exactly as
+    ``hydrohil serve`` does (entry point group ``hydrohil.viewers``)."""
+
+    def __init__(self, robot: str, tmp: Path, *, viewer: bool = True, token: str | None = None):
+        import uvicorn
+
+        from hil_server.api.app import create_app
+        from hil_server.service import HilService, ServiceConfig
+
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.token = token
+        cfg = ServiceConfig(robot=robot, can=None, port=self.port, viewer_port=free_port() if viewer else None,
+                            recordings_dir=str(tmp / "recordings"), token=token)
+        self.svc = HilService(cfg)
+        try:
+            self.svc.start_transports()
+            self.viewer = self.svc.plugins[0] if viewer else None
+            if viewer and self.viewer is None:
+                raise AssertionError("the viewer plugin did not load")
+            self.server = uvicorn.Server(uvicorn.Config(create_app(self.svc, close_on_shutdown=False), host="127.0.0.1",
+                                                        port=self.port, log_level="warning", access_log=False))
+            self.thread = threading.Thread(target=self.server.run, daemon=True)
+            self.thread.start()
+            wait_for(lambda: self.server.started, 30, "uvicorn to start")
+            wait_for(lambda: self.svc.state()["tick"] > 50, 60, "the engine to run")
+        except BaseException:
+            self.svc.close()
+            raise
+
+    def headers(self) -> dict:
+        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
+
+    def close(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+        self.svc.close()
+
+
+class ServeProcess:
+    """``hydrohil serve`` as a subprocess (the real console command)."""
+
+    def __init__(self, robot: str, tmp: Path, *, viewer_port: int = 0, token: str | None = None):
+        import httpx
+
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.token = token
+        cmd = [sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(self.port), "--can", "none",
+               "--viewer-port", str(viewer_port), "--recordings", str(tmp / "recordings")]
+        if token:
+            cmd += ["--token", token]
+        self.log_path = tmp / f"serve-{self.port}.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
+
+        def ready():
+            if self.proc.poll() is not None:
+                raise AssertionError(f"hydrohil serve exited ({self.proc.returncode}):\n{self.log_path.read_text()}")
+            try:
+                return httpx.get(self.url + "/api/v1/health", timeout=1.0).json()["engine_alive"]
+            except (httpx.HTTPError, ValueError, KeyError):
+                return False
+
+        try:
+            wait_for(ready, 120, "hydrohil serve", interval=0.2)
+        except BaseException:
+            self.close()
+            raise
+
+    def headers(self) -> dict:
+        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
+
+    def close(self) -> None:
+        stop_process(self.proc)
+        self.log.close()
+
+
+class ViewProcess:
+    """``hydrohil view --url ...`` as a subprocess."""
+
+    def __init__(self, url: str, tmp: Path, *, token: str | None = None):
+        self.port = free_port()
+        cmd = [sys.executable, "-m", "sim_core.cli", "view", "--url", url, "--port", str(self.port)]
+        if token:
+            cmd += ["--token", token]
+        self.log_path = tmp / f"view-{self.port}.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
+
+        def ready():
+            if self.proc.poll() is not None:
+                raise AssertionError(f"hydrohil view exited ({self.proc.returncode}):\n{self.log_path.read_text()}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.5):
+                    return True
+            except OSError:
+                return False
+
+        try:
+            wait_for(ready, 60, "hydrohil view", interval=0.2)
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> int:
+        rc = stop_process(self.proc)
+        self.log.close()
+        return rc
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 30.0) -> int:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+    return proc.returncode
+
+
+# ---- what viser sends a browser ------------------------------------------------------------------------
+def decode_viser_frame(buf: bytes) -> list[dict]:
+    """Messages of one viser websocket frame (viser 1.x wire format: two u64 lengths, zstd(msgpack),
+    8-byte aligned raw buffers that numpy fields point to by ``__binary_index``)."""
+    import msgspec
+    import zstandard
+
+    n_inner = int.from_bytes(buf[0:8], "little")
+    n_comp = int.from_bytes(buf[8:16], "little")
+    doc = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(buf[16:16 + n_comp], max_output_size=n_inner))
+    bufs, off = [], 16 + n_comp
+    for n in doc.get("binaryBufferLengths", ()):
+        off += (8 - off % 8) % 8
+        bufs.append(buf[off:off + n])
+        off += n
+
+    def resolve(x):
+        if isinstance(x, dict):
+            if "__binary_index" in x:
+                return np.frombuffer(bufs[x["__binary_index"]], dtype=np.dtype(x.get("dtype", "<f4")))
+            return {k: resolve(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [resolve(v) for v in x]
+        return x
+
+    return [resolve(m) for m in doc["messages"]]
+
+
+class ViserProbe:
+    """A websocket client that connects like a browser and records every message with its arrival time."""
+
+    def __init__(self, port: int):
+        import viser
+        from websockets.sync.client import connect
+
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None,
+                          open_timeout=10)
+        self.messages: list[tuple[float, dict]] = []
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            try:
+                raw = self.ws.recv(timeout=0.5)
+            except TimeoutError:
+                continue
+            except Exception:  # noqa: BLE001 - closed
+                return
+            t = time.monotonic()
+            if isinstance(raw, bytes):
+                for m in decode_viser_frame(raw):
+                    self.messages.append((t, m))
+
+    def of_type(self, kind: str, since: float = 0.0, name: str | None = None) -> list[tuple[float, dict]]:
+        return [(t, m) for t, m in list(self.messages)
+                if m.get("type") == kind and t >= since and (name is None or m.get("name") == name)]
+
+    def close(self):
+        self._stop.set()
+        try:
+            self.ws.close()
+        except Exception:  # noqa: BLE001
+            pass
+        self.thread.join(5)
+
+
+# ---- browser ----------------------------------------------------------------------------------------
+def require_chromium():
+    """Skip without /usr/bin/chromium, unless HYDROHIL_REQUIRE_BROWSER=1 (CI): then fail."""
+    if os.path.exists(CHROMIUM):
+        return
+    msg = f"{CHROMIUM} not found (apt-get install -y chromium)"
+    if os.environ.get("HYDROHIL_REQUIRE_BROWSER") == "1":
+        pytest.fail(msg + "; HYDROHIL_REQUIRE_BROWSER=1 requires the browser tests to run")
+    pytest.skip(msg)
+
+
+def open_page(browser, url: str):
+    page = browser.new_page(viewport=VIEWPORT)
+    page.goto(url)
+    page.wait_for_selector("text=E-STOP", timeout=60000)
+    return page
+
+
+def screenshot(page, path: Path) -> np.ndarray:
+    page.screenshot(path=str(path), timeout=90000)  # software WebGL on a busy 2-core machine can be slow
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB")).astype(np.int16)
+
+
+def changed(a: np.ndarray, b: np.ndarray, threshold: int = 40) -> np.ndarray:
+    """Pixels whose colour differs clearly (sum of absolute RGB differences)."""
+    return np.abs(a - b).sum(axis=2) > threshold
+
+
+def project(points: np.ndarray, camera) -> np.ndarray:
+    """Pixel coordinates (u, v) of world points seen by a viser client's camera (OpenCV convention:
+    +z forward, +y down; vertical field of view ``fov``)."""
+    import viser.transforms as tf
+
+    R = tf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    pc = (np.asarray(points) - np.asarray(camera.position)) @ R  # world -> camera: R^T (p - t)
+    w, h = camera.image_width, camera.image_height
+    f = 0.5 * h / np.tan(0.5 * camera.fov)
+    return np.stack([w / 2 + f * pc[:, 0] / pc[:, 2], h / 2 + f * pc[:, 1] / pc[:, 2]], axis=1)
+
+
+def region_mask(shape, uv: np.ndarray, margin: int) -> np.ndarray:
+    """Boolean image mask of the bounding box of pixel points, grown by ``margin``, clipped to the image."""
+    h, w = shape[:2]
+    x0, y0 = np.floor(uv.min(axis=0)).astype(int) - margin
+    x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + margin
+    m = np.zeros((h, w), dtype=bool)
+    m[max(y0, 0):min(y1, h), max(x0, 0):min(x1, w)] = True
+    return m
+
+
+def settled_screenshot(page, path: Path, mask: np.ndarray, *, timeout: float = 60.0, tol: float = 0.002,
+                       interval_ms: int = 700) -> np.ndarray:
+    """A screenshot once the masked part of the page stopped changing (viser fades objects in and out,
+    and software WebGL draws only a few frames a second)."""
+    prev = screenshot(page, path)
+    end = time.monotonic() + timeout
+    while True:
+        page.wait_for_timeout(interval_ms)
+        cur = screenshot(page, path)
+        if changed(prev, cur)[mask].mean() < tol:
+            return cur
+        if time.monotonic() > end:
+            raise AssertionError(f"{path.name}: the page did not settle within {timeout:g} s")
+        prev = cur
+
+
+def dismiss_notifications(page, wait_ms: int = 10000) -> None:
+    """Close viser's toasts (e.g. 'Software WebGL rendering detected', which comes a few seconds after
+    the page) so they do not cover the scene in screenshots."""
+    try:
+        page.wait_for_selector(".mantine-Notification-root", timeout=wait_ms)
+    except Exception:  # noqa: BLE001 - no toast (a hardware-accelerated browser)
+        return
+    buttons = page.locator(".mantine-Notification-root button")
+    for k in range(buttons.count()):
+        try:
+            buttons.nth(k).click(timeout=2000)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
