@@ -1,0 +1,103 @@
+"""One reproduction run of a scenario: emulator subprocess + controller process over CAN, the
+in-process comparison runs, metrics and figures."""
+
+from __future__ import annotations
+
+import json
+import logging
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .plant_local import LocalPlant, configured_spec
+from .scenarios import ANALYSE, SCENARIOS, make_controller
+from .server import EmulatorProcess
+from .tracking import run_loop
+
+log = logging.getLogger("hydrohil.reproduce")
+
+
+def write_params(scenario, out: Path) -> Path | None:
+    if not scenario.params:
+        return None
+    import tomli_w
+
+    path = out / f"{scenario.name}_params.toml"
+    path.write_bytes(tomli_w.dumps(scenario.params).encode())
+    return path
+
+
+def load_trace(path: Path) -> dict:
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def run_emulated(scenario, out: Path, mode: str, duration: float, params: Path | None, variant: str = "",
+                 timeout_s: float = 1800.0) -> tuple[dict, dict]:
+    """Start ``hydrohil serve`` for the scenario, reset it, run the controller as a separate process
+    over CAN; returns (trace, the controller's JSON summary)."""
+    feedback = scenario.control_rate_hz if mode == "realtime" else 100.0
+    trace_path = out / f"{scenario.name}_{variant or 'emulated'}_{mode}.npz"
+    with EmulatorProcess(scenario.robot, mode=mode, rate_hz=scenario.plant_rate_hz, feedback_rate_hz=feedback,
+                         params=params, workdir=out / "serve") as emu:
+        emu.reset(scenario.seed)
+        cmd = [sys.executable, "-m", "controllers.client", "--scenario", scenario.name, "--robot", scenario.robot,
+               "--port", str(emu.can_port), "--mode", mode, "--duration", f"{duration:g}",
+               "--tick", f"{1.0 / scenario.plant_rate_hz:.17g}", "--ticks", str(scenario.ticks),
+               "--feedback-rate", f"{feedback:g}", "--out", str(trace_path)]
+        if variant:
+            cmd += ["--variant", variant]
+        if params:
+            cmd += ["--params", str(params)]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s,
+                              cwd=str(Path(__file__).resolve().parent.parent))
+        if proc.returncode != 0:
+            raise RuntimeError(f"controller process failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+        summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    return load_trace(trace_path), summary
+
+
+def run_local(scenario, variant: str, duration: float, params: Path | None) -> dict:
+    """The same controller in-process (no CAN); ``simulated_quantized`` passes every signal through the DBC."""
+    spec = configured_spec(scenario.robot, params)
+    plant = LocalPlant(scenario.robot, spec=spec, seed=scenario.seed, tick_s=1.0 / scenario.plant_rate_hz,
+                       ticks=scenario.ticks, quantize=(variant == "simulated_quantized"))
+    return run_loop(plant, make_controller(scenario.name, spec, variant), duration)
+
+
+def run_scenario(name: str, out: str | Path, mode: str = "lockstep", duration: float | None = None,
+                 plots: bool = True) -> dict:
+    """Run scenario ``name``: emulated (CAN) + its local comparison runs; metrics (also written to
+    ``<out>/<name>.json``) with the figure paths under ``figures``."""
+    if name not in SCENARIOS:
+        raise KeyError(f"unknown scenario {name!r}; scenarios: {', '.join(SCENARIOS)}, all")
+    if mode not in ("lockstep", "realtime"):
+        raise ValueError(f"--mode {mode!r}: lockstep or realtime")
+    sc = SCENARIOS[name]
+    duration = sc.duration if duration is None else float(duration)
+    if not duration > 0.0:
+        raise ValueError(f"--duration {duration}: must be > 0 s")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    params = write_params(sc, out)
+    t0 = time.perf_counter()
+    runs: dict[str, dict] = {}
+    runs["emulated"], summary = run_emulated(sc, out, mode, duration, params)
+    t_emulated = time.perf_counter() - t0
+    for variant in sc.local_runs:
+        runs[variant] = run_local(sc, variant, duration, params)
+    spec = configured_spec(sc.robot, params)
+    metrics = ANALYSE[name](spec, runs)
+    metrics["run"] = {"scenario": name, "title": sc.title, "robot": sc.robot, "mode": mode, "duration_s": duration,
+                      "plant_rate_hz": sc.plant_rate_hz, "control_rate_hz": sc.control_rate_hz, "seed": sc.seed,
+                      "controller": summary, "emulated_wall_s": t_emulated,
+                      "params_file": str(params) if params else None}
+    if plots:
+        from .plots import PLOTS
+
+        metrics["figures"] = [str(p) for p in PLOTS[name](spec, runs, metrics, out)]
+    (out / f"{name}.json").write_text(json.dumps(metrics, indent=2, default=float))
+    return metrics
