@@ -1,7 +1,6 @@
-"""The monitor at protocol level, no browser: a websocket client reads what viser sends a browser
-(joint frames >= 30 Hz, changing, following the plant), the panel follows the plant, ``hydrohil
-serve`` starts the viewer plugin, and ``hydrohil view`` attaches to a remote server through REST +
-WebSocket (token, E-STOP, connection state)."""
+"""The in-process monitor at protocol level, no browser: a websocket client reads what viser sends
+a browser (joint frames >= 30 Hz, changing, following the plant), and the panel follows the plant.
+(``tests/test_web_remote.py``: ``hydrohil serve`` and ``hydrohil view`` as processes.)"""
 
 import time
 
@@ -9,9 +8,7 @@ import httpx
 import numpy as np
 import pytest
 
-from web_helpers import InProcessServer, ServeProcess, ViewProcess, ViserProbe, free_port, wait_for
-
-WINDOW_S = 3.0
+from web_helpers import WINDOW_S, InProcessServer, ViserProbe, frame_rate, wait_for
 
 
 def joint_angle_from_wxyz(scene, dof: str, wxyz) -> float:
@@ -22,11 +19,6 @@ def joint_angle_from_wxyz(scene, dof: str, wxyz) -> float:
     qt = scene._q_tree[i] * np.array([1.0, -1.0, -1.0, -1.0])  # conjugate of the origin rotation
     qa = quat_mul(qt, np.asarray(wxyz, dtype=float))
     return float(2.0 * np.arctan2(np.dot(qa[1:], scene.tree.axis[i]), qa[0]))
-
-
-def frame_rate(probe, node: str, t0: float, t1: float) -> tuple[float, list]:
-    msgs = [m for t, m in probe.of_type("SetOrientationMessage", name=node) if t0 <= t <= t1]
-    return len(msgs) / (t1 - t0), msgs
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +37,7 @@ def test_joint_transforms_stream_at_30hz(hydrolek):
                  "the scene to reach the probe")
         with httpx.Client(base_url=s.url, timeout=10) as c:
             c.put("/api/v1/commands", json={"voltages": {"j1": 1.5}}).raise_for_status()
-            time.sleep(0.5)  # spool and flow build up
+            time.sleep(1.5)  # spool and flow build up; the monitor is past its start-up
             t0 = time.monotonic()
             time.sleep(WINDOW_S)
             t1 = time.monotonic()
@@ -91,112 +83,3 @@ def test_panel_follows_the_plant(hydrolek):
     # the plot history carries plant time and commands
     t, v = panel.history.series("j3")
     assert t.size > 20 and np.all(np.diff(t) > 0) and np.nanmin(v[0]) == pytest.approx(-0.75)
-
-
-def test_serve_starts_the_viewer(tmp_path):
-    port = free_port()
-    srv = ServeProcess("harvester", tmp_path, viewer_port=port)
-    try:
-        r = httpx.get(f"http://127.0.0.1:{port}/", timeout=10)
-        assert r.status_code == 200 and "<html" in r.text.lower()
-        probe = ViserProbe(port)
-        try:
-            wait_for(lambda: any(m.get("props", {}).get("label") == "E-STOP" for _, m in probe.messages), 20,
-                     "the operator panel")
-            nodes = {m.get("name") for _, m in probe.messages}
-            for n in ("/robot/turret", "/robot/turret/boom_link", "/actuators"):
-                assert n in nodes
-        finally:
-            probe.close()
-    finally:
-        srv.close()
-    assert "browser monitor at" in srv.log_path.read_text()
-
-
-def test_view_attaches_to_a_remote_server(tmp_path):
-    token = "s3cret"
-    srv = ServeProcess("hydrolek", tmp_path, viewer_port=0, token=token)
-    view = None
-    try:
-        view = ViewProcess(srv.url, tmp_path, token=token)
-        probe = ViserProbe(view.port)
-        try:
-            node = "/robot/link1"
-            wait_for(lambda: probe.of_type("SetOrientationMessage", name=node) or
-                     any(m.get("name") == node for _, m in probe.messages), 30, "the remote scene")
-            with httpx.Client(base_url=srv.url, headers=srv.headers(), timeout=10) as c:
-                c.put("/api/v1/commands", json={"voltages": {"j1": -1.5}}).raise_for_status()
-                time.sleep(0.5)
-                t0 = time.monotonic()
-                time.sleep(WINDOW_S)
-                t1 = time.monotonic()
-                c.put("/api/v1/commands", json={"voltages": {"j1": 0.0}}).raise_for_status()
-            rate, msgs = frame_rate(probe, node, t0, t1)
-            assert rate >= 30.0, f"remote monitor: j1 frame updates at {rate:.1f} Hz (need >= 30)"
-            assert len({tuple(np.round(m["wxyz"], 9)) for m in msgs}) >= 0.9 * len(msgs)
-            status = [m["updates"]["content"] for _, m in probe.of_type("GuiUpdateMessage")
-                      if "content" in m.get("updates", {}) and "hydrolek" in m["updates"]["content"]]
-            assert status and "connected" in status[-1] and srv.url in status[-1]
-        finally:
-            probe.close()
-    finally:
-        if view is not None:
-            assert view.close() == 0
-        srv.close()
-
-
-def test_remote_link_commands_token_estop_and_connection_state(tmp_path):
-    from web.links import LinkError, RemoteLink
-
-    token = "t0ken"
-    srv = ServeProcess("hydrolek", tmp_path, viewer_port=0, token=token)
-    links = []
-    try:
-        # without a token: read-only, and says so
-        ro = RemoteLink(srv.url)
-        links.append(ro)
-        assert ro.auth_required and not ro.can_command
-        with pytest.raises(LinkError, match="token"):
-            ro.set_voltages({"j2": 1.0})
-        wait_for(lambda: ro.latest() is not None, 10, "the state stream")
-        assert ro.latest()["robot"] == "hydrolek" and ro.status()["connected"]
-        # a wrong token: the refusal reaches the operator
-        bad = RemoteLink(srv.url, "wrong")
-        links.append(bad)
-        refused = []
-        bad.errors.append(refused.append)
-        bad.set_voltages({"j2": 1.0})
-        wait_for(lambda: refused, 10, "the refusal")
-        assert "403" in refused[0]
-        # the right token: commands reach the plant (coalesced: the last value wins), E-STOP works
-        ok = RemoteLink(srv.url, token)
-        links.append(ok)
-        for v in (0.5, 1.0, 1.25):
-            ok.set_voltages({"j2": v})
-        with httpx.Client(base_url=srv.url, timeout=10) as c:
-            wait_for(lambda: c.get("/api/v1/state").json()["joints"]["j2"]["requested_voltage"] == 1.25, 10,
-                     "the remote command")
-            c.put("/api/v1/commands", json={"voltages": {"j4": 2.0}}, headers=srv.headers()).raise_for_status()
-            ok.set_estop(True)
-            st = c.get("/api/v1/state").json()
-            assert st["estop"] and all(js["requested_voltage"] == 0.0 for js in st["joints"].values())
-            wait_for(lambda: all(js["command_voltage"] == 0.0 for js in c.get("/api/v1/state").json()["joints"].values()),
-                     5, "every valve neutral")
-            ok.set_estop(False)
-            assert not c.get("/api/v1/estop").json()["engaged"]
-        # the server goes away: the link says so
-        srv.close()
-        wait_for(lambda: not ok.status()["connected"], 10, "the link to notice the server is gone")
-        assert ok.status()["detail"] != "streaming"
-    finally:
-        for link in links:
-            link.close()
-        srv.close()
-
-
-def test_view_reports_an_unreachable_server(tmp_path):
-    from conftest import run_cli
-
-    proc = run_cli("view", "--url", f"http://127.0.0.1:{free_port()}", "--port", str(free_port()), timeout=60)
-    assert proc.returncode == 2
-    assert "cannot reach" in proc.stderr

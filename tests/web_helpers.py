@@ -199,6 +199,15 @@ def decode_viser_frame(buf: bytes) -> list[dict]:
     return [resolve(m) for m in doc["messages"]]
 
 
+WINDOW_S = 3.0  # measuring window of the frame-rate checks
+
+
+def frame_rate(probe, node: str, t0: float, t1: float) -> tuple[float, list]:
+    """Orientation messages of one scene node between t0 and t1: (per second, the messages)."""
+    msgs = [m for t, m in probe.of_type("SetOrientationMessage", name=node) if t0 <= t <= t1]
+    return len(msgs) / (t1 - t0), msgs
+
+
 class ViserProbe:
     """A websocket client that connects like a browser and records every message with its arrival time."""
 
