@@ -40,7 +40,8 @@ def run_emulated(scenario, out: Path, mode: str, duration: float, params: Path |
     """Start ``hydrohil serve`` for the scenario, reset it, run the controller as a separate process
     over CAN; returns (trace, the controller's JSON summary)."""
     feedback = scenario.control_rate_hz if mode == "realtime" else 100.0
-    trace_path = out / f"{scenario.name}_{variant or 'emulated'}_{mode}.npz"
+    (out / "traces").mkdir(parents=True, exist_ok=True)
+    trace_path = out / "traces" / f"{scenario.name}_{variant or 'emulated'}_{mode}.npz"
     with EmulatorProcess(scenario.robot, mode=mode, rate_hz=scenario.plant_rate_hz, feedback_rate_hz=feedback,
                          params=params, workdir=out / "serve") as emu:
         emu.reset(scenario.seed)
@@ -71,7 +72,8 @@ def run_local(scenario, variant: str, duration: float, params: Path | None) -> d
 def run_scenario(name: str, out: str | Path, mode: str = "lockstep", duration: float | None = None,
                  plots: bool = True) -> dict:
     """Run scenario ``name``: emulated (CAN) + its local comparison runs; metrics (also written to
-    ``<out>/<name>.json``) with the figure paths under ``figures``."""
+    ``<out>/<name>.json``) with the figure paths under ``figures``. The controller's trace goes to
+    ``<out>/traces/``, the emulator's log to ``<out>/serve/``."""
     if name not in SCENARIOS:
         raise KeyError(f"unknown scenario {name!r}; scenarios: {', '.join(SCENARIOS)}, all")
     if mode not in ("lockstep", "realtime"):

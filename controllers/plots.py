@@ -52,7 +52,7 @@ def plot_stick(spec, runs, metrics, out: Path) -> list[Path]:
     # Fig. 12: tracking errors, simulated vs emulated
     e_em = (em["q_d"][:, a] - em["angle"][:, a]) * 1e3
     e_si = (si["q_d"][:, a] - si["angle"][:, a]) * 1e3
-    n = min(len(e_em), len(e_si))
+    e_si_em = np.interp(em["t"], si["t"], e_si)     # on the emulated run's time grid
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
     ax[0].plot(em["t"], e_em, color=C_EMU, lw=1.0, label=f"emulated (CAN, {mode})")
     ax[0].plot(si["t"], e_si, color=C_SIM, lw=1.0, ls="--", label="simulated (in-process)")
@@ -62,7 +62,7 @@ def plot_stick(spec, runs, metrics, out: Path) -> list[Path]:
                     f"max {m['max_error_rad'] * 1e3:.1f} mrad (0.5 rad peak-to-peak command)")
     ax[0].legend(loc="best")
     ax[0].grid(alpha=0.3)
-    ax[1].plot(em["t"][:n], e_em[:n] - e_si[:n], color="0.3", lw=0.8)
+    ax[1].plot(em["t"], e_em - e_si_em, color="0.3", lw=0.8)
     d = metrics["emulated_vs_simulated"]
     ax[1].set_ylabel("emulated -\nsimulated (mrad)")
     ax[1].set_xlabel("time (s)")

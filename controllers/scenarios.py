@@ -94,14 +94,17 @@ def feedforward_prediction(spec: RobotSpec, trace: dict, joint: str) -> np.ndarr
 
 
 def reversal_mask(t: np.ndarray, qd_d: np.ndarray, before: float = 0.5, after: float = 1.0) -> np.ndarray:
-    """Samples within [-before, +after] s of a polarity change of the desired speed (spool reversals:
-    the valve command must cross the deadband; the PID lags, so the window extends further after)."""
+    """Samples within [-before, +after] s of a spool reversal: a polarity change of the desired speed,
+    or the start of motion from rest (both times the valve command must cross the deadband; the PID
+    lags, so the window extends further after)."""
     s = np.sign(qd_d)
-    idx = np.flatnonzero(s[1:] * s[:-1] < 0)
+    idx = list(np.flatnonzero(s[1:] * s[:-1] < 0) + 1)
+    nz = np.flatnonzero(s != 0)
+    if len(nz) and (nz[0] > 0 or qd_d[0] == 0.0):
+        idx.insert(0, int(nz[0]))       # motion starts from rest
     mask = np.zeros(len(t), dtype=bool)
     for i in idx:
-        tc = t[i + 1]
-        mask |= (t >= tc - before) & (t <= tc + after)
+        mask |= (t >= t[i] - before) & (t <= t[i] + after)
     return mask
 
 
@@ -114,21 +117,23 @@ def analyse_stick(spec: RobotSpec, runs: dict[str, dict]) -> dict:
         err[name] = e
         out[name] = {"rms_error_rad": float(np.sqrt(np.mean(e ** 2))), "max_error_rad": float(np.max(np.abs(e))),
                      "duration_s": float(tr["t"][-1] + (tr["t"][1] - tr["t"][0]))}
-    em, si = err["emulated"], err["simulated"]
-    n = min(len(em), len(si))
-    d = em[:n] - si[:n]
+    # on the emulated run's time grid (lockstep: the same grid; realtime: the controller's own clock)
+    t_em = runs["emulated"]["t"]
+    em = err["emulated"]
+    si = np.interp(t_em, runs["simulated"]["t"], err["simulated"])
+    d = em - si
     out["emulated_vs_simulated"] = {"rms_difference_rad": float(np.sqrt(np.mean(d ** 2))),
                                     "max_difference_rad": float(np.max(np.abs(d))),
-                                    "relative_rms": float(np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(em[:n] ** 2)))}
+                                    "relative_rms": float(np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(em ** 2)))}
     if "simulated_quantized" in err:
-        dq = em[:n] - err["simulated_quantized"][:n]
+        dq = em - np.interp(t_em, runs["simulated_quantized"]["t"], err["simulated_quantized"])
         out["emulated_vs_simulated_quantized"] = {"max_difference_rad": float(np.max(np.abs(dq)))}
     # Fig. 14: feedforward alone vs the PID's command on the emulated run
     tr = runs["emulated"]
     u_ff = feedforward_prediction(spec, tr, "stick")
     u = tr["u"][:, a]
     rev = reversal_mask(tr["t"], tr["qd_d"][:, a])
-    away = ~rev & (tr["t"] > 1.0)     # the first second: the PID's integral is still building up
+    away = ~rev
     diff = u_ff - u
     out["feedforward"] = {
         "rms_command_v": float(np.sqrt(np.mean(u[away] ** 2))),
@@ -214,7 +219,10 @@ MARS_OFFSETS = ((0.25, 0.20, -0.25, 0.30, 0.35),                    # rad from t
 MARS_MOVE_TIME = 2.0         # s: quintic transition to each target
 MARS_HOLD_TIME = 3.0         # s: hold; the last second of each hold is checked for settling
 MARS_SETTLED_RAD = 0.005     # rad: a hold counts as settled when the mean error of its last second is below
-                             # this (5 mm at the arm's ~1 m reach) and the valve stays closed throughout
+                             # this (5 mm at the arm's ~1 m reach), the valve stays closed throughout and
+MARS_STILL_RAD = 0.003       # rad: the measured angle's peak-to-peak stays within the sensor noise band
+                             # (10 x the 0.3 mrad rms potentiometer noise); a limit cycle must open the
+                             # valve and move the joint, so it fails both
 # The PID for a valve with overlap (see .pid): deadband compensation w_c = the identified width, ramped
 # over 0.2 V, so a correction of 0.16 V / Kp = 1.6 mrad or more opens the valve; the integral runs only
 # within 10 mrad of the reference (it trims the last millimetres instead of winding up during a move);
@@ -282,7 +290,8 @@ def analyse_mars(spec: RobotSpec, runs: dict[str, dict], check_window: float = 1
                      "max_final_error_rad": max(h["final_error_rad"] for h in holds),
                      "max_peak_to_peak_rad": max(h["peak_to_peak_rad"] for h in holds),
                      "max_rms_velocity_rad_s": max(h["rms_velocity_rad_s"] for h in holds),
-                     "settled_holds": sum(1 for h in holds if h["final_error_rad"] < MARS_SETTLED_RAD and h["open_fraction"] == 0.0),
+                     "settled_holds": sum(1 for h in holds if h["final_error_rad"] < MARS_SETTLED_RAD and h["open_fraction"] == 0.0
+                                          and h["peak_to_peak_rad"] < MARS_STILL_RAD),
                      "holds_with_valve_activity": sum(1 for h in holds if h["valve_openings"] > 0 or h["open_fraction"] > 0),
                      "n_holds": len(holds)}
     return out
