@@ -319,13 +319,15 @@ def settled_screenshot(page, path: Path, mask: np.ndarray, *, timeout: float = 6
 def dismiss_notifications(page, wait_ms: int = 10000) -> None:
     """Close viser's toasts (e.g. 'Software WebGL rendering detected', which comes a few seconds after
     the page) so they do not cover the scene in screenshots."""
+    toasts = page.locator(".mantine-Notification-root")
     try:
-        page.wait_for_selector(".mantine-Notification-root", timeout=wait_ms)
+        toasts.first.wait_for(state="visible", timeout=wait_ms)
     except Exception:  # noqa: BLE001 - no toast (a hardware-accelerated browser)
         return
-    buttons = page.locator(".mantine-Notification-root button")
-    for k in range(buttons.count()):
+    end = time.monotonic() + 15.0
+    while toasts.count() and time.monotonic() < end:
         try:
-            buttons.nth(k).click(timeout=2000)
-        except Exception:  # noqa: BLE001 - already gone
+            toasts.first.locator("button").first.click(timeout=2000)
+        except Exception:  # noqa: BLE001 - it moved or went away meanwhile
             pass
+        page.wait_for_timeout(500)
