@@ -110,7 +110,7 @@ def test_extended_model_runs_in_simulate_and_reproduces_the_record(cli, tmp_path
 def test_separate_validation_record(cli, tmp_path):
     """--validation: fits are scored on the other record (its whole length)."""
     case = next(c for c in CASES if c.name == "delay")
-    meas, truth, _ = generate(cli, case, tmp_path)
+    meas, truth = generate(cli, case, tmp_path)
     other = tmp_path / "other"
     other.mkdir()
     cli("excite", "--robot", case.robot, "--joint", case.joint, "--duration", 20, "--seed", 99, "--out", other / "in.csv",

@@ -135,6 +135,8 @@ def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progr
     timings: dict = {}
     targets = rec.targets
     check = check_record(rec, spec)
+    if val is not None:
+        check_record(val, spec)
     notes = list(rec.notes) + (list(val.notes) if val is not None else [])
     for j, share in check.end_stop_share.items():
         if share > 0.05:
@@ -151,6 +153,9 @@ def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progr
     # baseline: calibrate the nominal flow gains
     keys = default_free(spec, rec)
     log(f"calibrating {', '.join(keys)}")
+    if not fast.simulate(m0, est.n).ok:
+        raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
+                         f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
     cal = calibrate(m0, fast, est, keys)
     base_fast = cal.spec
     timings["baseline"] = time.perf_counter() - t_start

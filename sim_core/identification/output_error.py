@@ -161,7 +161,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             s = spec_at(x)
         except ValueError:
             return np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
-        r = problem.residuals(runner.simulate(s, problem.n))
+        r = problem.residuals(runner.simulate(s, problem.n, owned=True))
         c = float(r @ r)
         if c < best["cost"]:
             best.update(cost=c, x=np.array(x, dtype=float), r=r)
@@ -177,14 +177,14 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                     raise _Budget
                 sims[0] += 1
                 try:
-                    out_g = runner.simulate(spec_at(x), gp.n)
+                    out_g = runner.simulate(spec_at(x), gp.n, owned=True)
                 except ValueError:
                     out_g = None
                 r = gp.residuals(out_g) if out_g is not None else np.full(1, FAIL_RESIDUAL)
                 costs.append(float(r @ r))
             if start_cost is None:
                 sims[0] += 1
-                r = gp.residuals(runner.simulate(spec_at(x0), gp.n))
+                r = gp.residuals(runner.simulate(spec_at(x0), gp.n, owned=True))
                 start_cost = float(r @ r)
             starts.append(x0)
             costs.append(start_cost)
@@ -222,7 +222,7 @@ def add_uncertainty(out: FitResult, runner, problem) -> None:
         xp = x.copy()
         xp[i] += h
         out.sims += 1
-        J[:, i] = (problem.residuals(runner.simulate(_spec_at(out.start_spec, out.free, xp), problem.n)) - r0) / h
+        J[:, i] = (problem.residuals(runner.simulate(_spec_at(out.start_spec, out.free, xp), problem.n, owned=True)) - r0) / h
     m = r0.size
     dof = max(m - k, 1)
     s2 = float(r0 @ r0) / dof

@@ -142,6 +142,7 @@ def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, f
         raise ValueError(f"--initial-pose {policy!r}: expected auto, spec or data")
     pose: dict[str, float] = {}
     head = max(3, int(np.searchsorted(t, 0.02)))
+    tree = spec.tree
     for j in spec.joint_names:
         q_spec = float(spec.joint(j).settings["initial_position"])
         pose[j] = q_spec
@@ -150,6 +151,13 @@ def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, f
         q_meas = float(np.median(angles[j][:head]))
         far = abs(q_meas - q_spec) > INITIAL_POSE_TOLERANCE
         if policy == "data" or (policy == "auto" and far):
+            i = tree.index(spec.joint(j).dof)
+            lo, hi = float(tree.lower[i]), float(tree.upper[i])
+            inside = min(max(q_meas, lo + END_STOP_MARGIN), hi - END_STOP_MARGIN) if lo < hi else q_meas
+            if inside != q_meas:
+                notes.append(f"{j}: the record starts at {q_meas:.3f} rad, outside the joint's range [{lo:.3f}, {hi:.3f}] "
+                             f"rad (check the units, rad, and the sensor calibration); the simulation starts at {inside:.3f}")
+                q_meas = inside
             pose[j] = q_meas
             if policy == "auto":
                 notes.append(
@@ -174,6 +182,10 @@ def check_record(rec: Record, spec) -> DataCheck:
         if math.isfinite(hi):
             near |= y > hi - END_STOP_MARGIN
         stops[j] = float(near.mean())
+        out = (y < lo - 0.1) | (y > hi + 0.1) if math.isfinite(lo) and math.isfinite(hi) else np.zeros(y.size, bool)
+        if out.any():
+            rec.notes.append(f"q_{j}: {100 * out.mean():.0f} % of the samples lie more than 0.1 rad outside the joint's range "
+                             f"[{lo:.3f}, {hi:.3f}] rad: check the units (rad) and the sensor calibration")
         src[j] = "spec" if rec.initial_pose[j] == spec.joint(j).settings["initial_position"] else "data"
         ceiling[j] = fit_ceiling(y, noise[j])
     for j in rec.excited:

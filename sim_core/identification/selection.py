@@ -12,9 +12,11 @@ pressures) over the current model. A candidate is accepted when
 * its parameters are identified: none ends on a search bound other than the one where the effect
   vanishes, and at least one differs from "no effect" by more than 3 standard deviations.
 
-The best accepted candidate joins the model (greedy forward selection); the next round refits the
-shortlist jointly with everything accepted, and stops when nothing passes or when the score is
-within the threshold of its noise ceiling. The runner-up is kept; when its gain is within 20 % of the
+The best accepted candidate joins the model (greedy forward selection); the next round refits every
+remaining candidate jointly with everything accepted (a large effect masks the others, so first-round
+gains are no guide), and stops when nothing passes or when the score is within the threshold of its
+noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
+threshold. The runner-up is kept; when its gain is within 20 % of the
 winner's the choice is flagged ambiguous with the measurement that would decide.
 """
 
@@ -41,8 +43,6 @@ NOISE_FACTOR = 3.0          # ... or 3 x the noise spread of the gain, when larg
 SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
 AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
 MAX_EFFECTS = 3
-SHORTLIST = 6               # candidates refitted in later rounds
-SHORTLIST_SHARE = 0.25      # ... those whose first-round gain reached this share of the threshold
 NOISE_DRAWS = 16
 UNCERTAINTY_SHARE = 0.5     # candidates below this share of the threshold skip the uncertainty step
 GRID_SHARE = 0.5            # starting points are ranked on the first half of the estimation data
@@ -334,11 +334,46 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         accepted_evals.append(best)
         values.update(best.values)
         model = model_with(model, [], best.candidate, best.values)
-        first = {e.candidate.label: e.gain for e in rounds[0]}
         done = {(c.effect, c.joint) for c, _ in accepted}
-        pool = [c for c in cands if (c.effect, c.joint) not in done
-                and first.get(c.label, 0.0) >= SHORTLIST_SHARE * THRESHOLD_POINTS]
-        pool = sorted(pool, key=lambda c: -first.get(c.label, 0.0))[:SHORTLIST]
+        # a large effect masks the others: every remaining candidate gets another chance
+        pool = [c for c in cands if (c.effect, c.joint) not in done]
     else:
         stopped = f"reached {max_effects} effects"
+    if len(accepted) >= 2:
+        model, accepted, accepted_evals = backward(st, base_spec, model, accepted, accepted_evals, log)
+        values = {}
+        for ev in accepted_evals:
+            values.update(ev.values)
     return Selection(accepted_evals, rounds, model, values, stopped, ceiling)
+
+
+def without(base_spec, model, cand: Candidate):
+    """``model`` without ``cand``: switched off, or back to the nominal values if the base had it."""
+    s = model.copy()
+    nominal = [e for e in base_spec.effects if e.name == cand.effect and e.joint == cand.joint]
+    if nominal:
+        s.enable_effect(cand.effect, cand.joint, **nominal[0].params)
+    else:
+        s.disable_effect(cand.effect, cand.joint)
+    return s
+
+
+def backward(st: Setting, base_spec, model, accepted, evals, log):
+    """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
+    an early pick can be a stand-in for effects named later."""
+    score = lambda out: float(np.mean([v["score"] for v in st.val.fits(out).values()]))
+    full = score(st.val_runner.simulate(model, st.val.n))
+    for i in reversed(range(len(accepted))):
+        cand = accepted[i][0]
+        rest = accepted[:i] + accepted[i + 1:]
+        minus = without(base_spec, model, cand)
+        free = free_list(minus, None, rest, st.calib_keys)
+        res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
+        drop = full - score(st.val_runner.simulate(res.spec, st.val.n))
+        if drop < THRESHOLD_POINTS:
+            log(f"backward: dropped {cand.label} (removing it costs {drop:.2f} points)")
+            evals[i].reasons.append(f"dropped in the backward pass: removing it costs only {drop:.2f} points")
+            model = res.spec
+            accepted, evals = rest, evals[:i] + evals[i + 1:]
+            full = score(st.val_runner.simulate(model, st.val.n))
+    return model, accepted, evals

@@ -50,11 +50,12 @@ class Runner:
         self.substep = substep
         self.calls = 0
 
-    def simulate(self, spec, n: int | None = None, rec: Record | None = None) -> Outputs:
-        """Run ``spec`` (already a model spec) over the first ``n`` samples of the record."""
+    def simulate(self, spec, n: int | None = None, rec: Record | None = None, owned: bool = False) -> Outputs:
+        """Run ``spec`` (already a model spec) over the first ``n`` samples of the record; ``owned``:
+        the caller's private copy, which may be changed (saves a copy per simulation)."""
         rec = rec or self.rec
         n = rec.n if n is None else n
-        s = spec.copy()
+        s = spec if owned else spec.copy()
         for j in s.joints:   # start where this record starts
             j.settings.set("initial_position", rec.initial_pose.get(j.name, j.settings["initial_position"]))
         if self.substep is not None and spec.integrator["max_substep"] < self.substep:
