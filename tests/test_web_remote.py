@@ -11,12 +11,20 @@ import pytest
 from web_helpers import WINDOW_S, ServeProcess, ViewProcess, ViserProbe, frame_rate, free_port, wait_for
 
 
+def _get(url):
+    try:
+        return httpx.get(url, timeout=5)
+    except httpx.HTTPError:
+        return None
+
+
 def test_serve_starts_the_viewer(tmp_path):
     port = free_port()
     srv = ServeProcess("harvester", tmp_path, viewer_port=port)
     try:
-        r = httpx.get(f"http://127.0.0.1:{port}/", timeout=10)
-        assert r.status_code == 200 and "<html" in r.text.lower()
+        # REST is up; the viewer comes up beside it in the background
+        page = wait_for(lambda: _get(f"http://127.0.0.1:{port}/"), 60, "the viewer's page")
+        assert page.status_code == 200 and "<html" in page.text.lower()
         probe = ViserProbe(port)
         try:
             wait_for(lambda: any(m.get("props", {}).get("label") == "E-STOP" for _, m in probe.messages), 20,
@@ -24,11 +32,12 @@ def test_serve_starts_the_viewer(tmp_path):
             nodes = {m.get("name") for _, m in probe.messages}
             for n in ("/robot/turret", "/robot/turret/boom_link", "/actuators"):
                 assert n in nodes
+            wait_for(lambda: f"browser monitor at http://127.0.0.1:{port}/" in srv.log_path.read_text(), 30,
+                     "the viewer's start-up line in the log")
         finally:
             probe.close()
     finally:
         srv.close()
-    assert "browser monitor at" in srv.log_path.read_text()
 
 
 def test_view_attaches_to_a_remote_server(tmp_path):

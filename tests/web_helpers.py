@@ -66,9 +66,12 @@ class InProcessServer:
         self.svc = HilService(cfg)
         try:
             self.svc.start_transports()
-            self.viewer = self.svc.plugins[0] if viewer else None
-            if viewer and self.viewer is None:
-                raise AssertionError("the viewer plugin did not load")
+            if viewer:
+                if not self.svc.plugins:
+                    raise AssertionError("the viewer plugin did not load")
+                self.viewer = self.svc.plugins[0].wait(90)  # the plugin builds its viewer in the background
+            else:
+                self.viewer = None
             self.server = uvicorn.Server(uvicorn.Config(create_app(self.svc, close_on_shutdown=False), host="127.0.0.1",
                                                         port=self.port, log_level="warning", access_log=False))
             self.thread = threading.Thread(target=self.server.run, daemon=True)
@@ -261,8 +264,8 @@ def require_chromium():
 
 def open_page(browser, url: str):
     page = browser.new_page(viewport=VIEWPORT)
-    page.goto(url)
-    page.wait_for_selector("text=E-STOP", timeout=60000)
+    page.goto(url, timeout=120000)  # generous: a loaded 2-core machine renders software WebGL slowly
+    page.wait_for_selector("text=E-STOP", timeout=120000)
     return page
 
 
