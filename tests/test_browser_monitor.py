@@ -166,7 +166,8 @@ def test_estop_in_the_page_neutralises_every_valve(hydrolek):
     s.focus()
     for _ in range(8):
         m.page.keyboard.press("ArrowLeft")
-    wait_for(lambda: svc.state()["joints"]["j4"]["requested_voltage"] == pytest.approx(-0.4), 15, "the j4 slider command")
+    wait_for(lambda: svc.state()["joints"]["j4"]["requested_voltage"] == pytest.approx(-0.4), 15,
+             "the j4 slider command")
     assert all(js["command_voltage"] != 0.0 for js in svc.state()["joints"].values())
     m.page.get_by_role("button", name="E-STOP", exact=True).click()
     wait_for(lambda: svc.estopped, 15, "the E-STOP to engage")

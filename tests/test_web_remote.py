@@ -107,7 +107,8 @@ def test_remote_link_commands_token_estop_and_connection_state(tmp_path):
             ok.set_estop(True)
             st = c.get("/api/v1/state").json()
             assert st["estop"] and all(js["requested_voltage"] == 0.0 for js in st["joints"].values())
-            wait_for(lambda: all(js["command_voltage"] == 0.0 for js in c.get("/api/v1/state").json()["joints"].values()),
+            wait_for(lambda: all(js["command_voltage"] == 0.0
+                                 for js in c.get("/api/v1/state").json()["joints"].values()),
                      5, "every valve neutral")
             ok.set_estop(False)
             assert not c.get("/api/v1/estop").json()["engaged"]

@@ -100,8 +100,8 @@ class ServeProcess:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.token = token
-        cmd = [sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(self.port), "--can", "none",
-               "--viewer-port", str(viewer_port), "--recordings", str(tmp / "recordings")]
+        cmd = [sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(self.port),
+               "--can", "none", "--viewer-port", str(viewer_port), "--recordings", str(tmp / "recordings")]
         if token:
             cmd += ["--token", token]
         self.log_path = tmp / f"serve-{self.port}.log"

@@ -6,7 +6,8 @@ import logging
 
 
 def register(sub):
-    p = sub.add_parser("view", help="browser monitor and operator panel for a running HydroHIL server (REST + WebSocket)")
+    p = sub.add_parser("view", help="browser monitor and operator panel for a running HydroHIL server "
+                                    "(REST + WebSocket)")
     p.add_argument("--url", default="http://127.0.0.1:8000", help="the server's REST address (default %(default)s)")
     p.add_argument("--port", type=int, default=8080, help="port of this monitor's web page (default %(default)s)")
     p.add_argument("--host", default="127.0.0.1", help="address this monitor binds (default loopback)")

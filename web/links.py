@@ -95,7 +95,8 @@ class RemoteLink:
             raise LinkError(f"--url {url!r}: use http://host:port (the server's REST address)")
         self.base = f"{u.scheme}://{u.netloc}{u.path.rstrip('/')}"
         ws_scheme = "wss" if u.scheme == "https" else "ws"
-        self.ws_url = f"{ws_scheme}://{u.netloc}{u.path.rstrip('/')}/api/v1/stream?rate={min(max(rate_hz, 1.0), 250.0):g}"
+        rate = min(max(rate_hz, 1.0), 250.0)
+        self.ws_url = f"{ws_scheme}://{u.netloc}{u.path.rstrip('/')}/api/v1/stream?rate={rate:g}"
         self.token = token
         self.timeout = timeout
         self.errors: list = []

@@ -104,13 +104,16 @@ class OperatorPanel:
                 empty, series=({"label": "t − now (s)"},
                                {"label": "requested (V)", "stroke": "#1f77b4", "width": 1.5, "scale": "V"},
                                {"label": "applied (V)", "stroke": "#d62728", "width": 1.5, "scale": "V"}),
-                title="command (V)", scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}, "V": {"auto": False, "range": [v_lo, v_hi]}},
+                title="command (V)",
+                scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]},
+                        "V": {"auto": False, "range": [v_lo, v_hi]}},
                 axes=({}, {"scale": "V", "size": 50}), aspect=2.0)
             self.plot_angle = gui.add_uplot(
                 empty, series=({"label": "t − now (s)"},
                                {"label": "measured (°)", "stroke": "#2ca02c", "width": 1.5, "scale": "deg"},
                                {"label": "true (°)", "stroke": "#555555", "width": 1.0, "scale": "deg"}),
-                title="angle (°)", scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}, "deg": {"auto": True}},
+                title="angle (°)",
+                scales={"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}, "deg": {"auto": True}},
                 axes=({}, {"scale": "deg", "size": 50}), aspect=2.0)
             self.plot_joint.on_update(lambda _ev: self._update_plots(force=True))
         with tabs.add_tab("Health", icon="heart-rate-monitor"):
@@ -131,7 +134,7 @@ class OperatorPanel:
 
     # ---- operator actions ----------------------------------------------------------------------------
     def notify(self, body: str, title: str = "HydroHIL", client=None, colour: str = "red") -> None:
-        self.notifications.append(body)
+        self.notifications = self.notifications[-49:] + [body]
         targets = [client] if client is not None else list(self.server.get_clients().values())
         for c in targets:
             try:
@@ -331,7 +334,8 @@ class OperatorPanel:
         wd = [j for j, js in state["joints"].items() if js.get("watchdog")]
         body = "<ul style='margin:0;padding-left:1.2em'>" + "".join(rows) + "</ul>" if rows else "no active faults"
         wds = "watchdog tripped on " + ", ".join(wd) if wd else "no watchdog trips active"
-        return f"<div style='font-size:0.85em;padding:0 0.5em'><b>Faults</b><br>{body}<br><b>Watchdog</b><br>{wds}</div>"
+        return (f"<div style='font-size:0.85em;padding:0 0.5em'><b>Faults</b><br>{body}<br>"
+                f"<b>Watchdog</b><br>{wds}</div>")
 
     def _health_html(self, state: dict, ls: dict, vs: dict) -> str:
         loop = state.get("loop", {})
@@ -346,7 +350,8 @@ class OperatorPanel:
                                      f"{_fmt(late.get('max'), '.0f')} µs"),
             ("real-time priority", "yes" if loop.get("realtime_priority") else "no"),
             ("supply pressure", f"{state.get('supply_pressure', 0.0) / 1e5:.1f} bar"),
-            ("link", f"{ls.get('kind')} · {html.escape(str(ls.get('detail', '')))} · reconnects {ls.get('reconnects', 0)}"),
+            ("link", f"{ls.get('kind')} · {html.escape(str(ls.get('detail', '')))} · "
+                     f"reconnects {ls.get('reconnects', 0)}"),
             ("viewer", f"{vs.get('rate_hz', 0.0):.1f} Hz · {vs.get('frame_cpu_ms', 0.0):.2f} ms CPU/frame · "
                        f"{vs.get('clients', 0)} browser(s)"),
         ]
