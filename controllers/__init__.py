@@ -11,9 +11,11 @@ One idea per module:
                        deadband compensation, settle band)
 * :mod:`.kinematics`   harvester forward/inverse kinematics of the end point (``stick_tip``)
 * :mod:`.trajectories` reference trajectories (sinusoid, operator Cartesian velocity profile, target sequences)
-* :mod:`.scenarios`    the four closed-loop experiments: controller loops and their metrics
+* :mod:`.tracking`     PID (+ feedforward) on every joint, and the generic control loop that records a trace
+* :mod:`.scenarios`    the closed-loop experiments (stick, cartesian, mars_nd): controllers and their metrics
 * :mod:`.client`       the controller process (``python -m controllers.client``): runs one scenario over CAN
 * :mod:`.server`       starting ``hydrohil serve`` subprocesses on free ports
+* :mod:`.experiment`   one reproduction: emulator + controller process, the in-process comparison runs, metrics
 * :mod:`.plots`        the figures
 * :mod:`.cli`          ``hydrohil reproduce``
 """

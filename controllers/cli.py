@@ -9,6 +9,7 @@ figures to ``<out>/*.png``.
 from __future__ import annotations
 
 import json
+import subprocess
 
 
 SCENARIO_NAMES = ("stick", "cartesian", "mars_nd")   # = scenarios.SCENARIOS (kept light: no imports at start-up)
@@ -54,7 +55,7 @@ def _fmt(name: str, m: dict) -> list[str]:
                 continue
             lines.append(f"  {run:<10} settled holds {r['settled_holds']}/{r['n_holds']}, holds with valve activity in "
                          f"the last second {r['holds_with_valve_activity']}, max final error "
-                         f"{r['max_final_error_rad'] * 1e3:.2f} mrad, max rms velocity {r['max_rms_velocity_rad_s'] * 1e3:.2f} mrad/s")
+                         f"{r['max_final_error_rad'] * 1e3:.2f} mrad, largest angle peak-to-peak {r['max_peak_to_peak_rad'] * 1e3:.2f} mrad")
         return lines
     return []
 
@@ -74,7 +75,10 @@ def run(args) -> int:
         raise CliError(f"--duration {args.duration:g}: must be > 0 s")
     results = {}
     for name in names:
-        m = run_scenario(name, args.out, mode=args.mode, duration=args.duration)
+        try:
+            m = run_scenario(name, args.out, mode=args.mode, duration=args.duration)
+        except (RuntimeError, TimeoutError, OSError, subprocess.TimeoutExpired) as exc:
+            raise CliError(f"scenario {name}: {exc}") from None
         results[name] = m
         if not args.json:
             r = m["run"]

@@ -58,7 +58,14 @@ def run_emulated(scenario, out: Path, mode: str, duration: float, params: Path |
         if proc.returncode != 0:
             raise RuntimeError(f"controller process failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
         summary = json.loads(proc.stdout.strip().splitlines()[-1])
-    return load_trace(trace_path), summary
+        loop = emu.state().get("loop", {})
+        summary["emulator_loop"] = {k: loop.get(k) for k in ("ticks", "overruns", "resyncs", "watchdog_trips",
+                                                              "lateness_us", "realtime_priority")}
+    trace = load_trace(trace_path)
+    # the controller's period as it saw it (realtime: feedback arrival; lockstep: exact)
+    dt = np.diff(trace["t"])
+    summary["period_s"] = {"median": float(np.median(dt)), "max": float(np.max(dt))} if len(dt) else {}
+    return trace, summary
 
 
 def run_local(scenario, variant: str, duration: float, params: Path | None) -> dict:

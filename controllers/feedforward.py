@@ -50,6 +50,8 @@ class JointFeedforward:
             i = tree.index(js.dof)
             self.area_a, self.area_b = cyl.area_a, cyl.area_b    # m^2
             self.c0, self.d1, self.d2, _, _ = cyl.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+            cylinder_length(0.5 * (tree.lower[i] + tree.upper[i]), self.c0, self.d1, self.d2)  # load the compiled
+            # function now: its first call takes ~1 s, which a realtime loop must not spend mid-run
         else:
             rot = js.components["rotary"]
             self.flow_per_rad = float(rot["gear_ratio"]) * float(rot["displacement"])   # m^3/rad at the joint

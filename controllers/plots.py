@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .scenarios import (MARS_ARM_JOINTS, MARS_DEADBAND_V, feedforward_prediction,  # noqa: E402
-                        reversal_mask)
+from .scenarios import (MARS_ARM_JOINTS, MARS_DEADBAND_V, MARS_SETTLED_RAD,  # noqa: E402
+                        feedforward_prediction, reversal_mask)
 
 C_EMU, C_SIM, C_REF, C_ALT = "tab:blue", "tab:orange", "k", "tab:red"
 
@@ -26,8 +26,9 @@ def _shade(ax, t, mask, label=None):
             label, on = None, False
 
 
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
+def _save(fig, path: Path, tight: bool = True) -> Path:
+    if tight:
+        fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -102,8 +103,8 @@ def plot_cartesian(spec, runs, metrics, out: Path) -> list[Path]:
     em = runs["emulated"]
     mode = metrics["run"]["mode"]
     joints = list(em["joints"])
-    fig = plt.figure(figsize=(13, 7.5))
-    gs = fig.add_gridspec(3, 3, width_ratios=[1.5, 1, 1])
+    fig = plt.figure(figsize=(14, 7.5))
+    gs = fig.add_gridspec(3, 3, width_ratios=[1.5, 1, 1], wspace=0.4)
     ax3 = fig.add_subplot(gs[:, 0], projection="3d")
     ax3.plot(*em["p_d"].T, color=C_REF, lw=2.5, label="commanded path")
     ax3.plot(*em["p_m"].T, color=C_EMU, lw=1.2, label=f"response (emulated, {mode})")
@@ -146,7 +147,8 @@ def plot_cartesian(spec, runs, metrics, out: Path) -> list[Path]:
         if k == 2:
             ax.set_xlabel("time (s)")
     fig.suptitle("Fig. 15: Cartesian end-point control (operator velocity -> path -> IK -> joint PID + valve feedforward)")
-    return [_save(fig, out / "fig15_cartesian.png")]
+    fig.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.08, hspace=0.3)
+    return [_save(fig, out / "fig15_cartesian.png", tight=False)]
 
 
 def plot_mars(spec, runs, metrics, out: Path) -> list[Path]:
@@ -156,19 +158,20 @@ def plot_mars(spec, runs, metrics, out: Path) -> list[Path]:
     fig, axs = plt.subplots(len(MARS_ARM_JOINTS), 2, figsize=(13, 11), sharex=True)
     for r, jj in enumerate(MARS_ARM_JOINTS):
         ax, axu = axs[r]
-        for arm, ls in (("left", "-"), ("right", "--")):
+        for arm, ls, col in (("left", "-", C_EMU), ("right", "-", "tab:purple")):
             j = f"{arm}_{jj}"
             if j not in joints:
                 continue
             a = joints.index(j)
-            ax.plot(em["t"], 1e3 * (em["q_d"][:, a] - em["angle"][:, a]), color=C_EMU, lw=1.0, ls=ls,
+            ax.plot(em["t"], 1e3 * (em["q_d"][:, a] - em["angle"][:, a]), color=col, lw=1.0, ls=ls,
                     label=f"designed PID, {arm} arm (emulated, {mode})")
-            axu.plot(em["t"], em["u_applied"][:, a], color=C_EMU, lw=0.9, ls=ls, label=f"designed, {arm}")
+            axu.plot(em["t"], em["u_applied"][:, a], color=col, lw=0.9, ls=ls, label=f"designed, {arm}")
             if "plain_pid" in runs and arm == "left":
                 pp = runs["plain_pid"]
                 ax.plot(pp["t"], 1e3 * (pp["q_d"][:, a] - pp["angle"][:, a]), color=C_ALT, lw=0.9,
                         label="plain PID, left arm (simulated)")
                 axu.plot(pp["t"], pp["u_applied"][:, a], color=C_ALT, lw=0.8, label="plain PID, left")
+        ax.axhspan(-1e3 * MARS_SETTLED_RAD, 1e3 * MARS_SETTLED_RAD, color="tab:green", alpha=0.12, lw=0)
         ax.set_ylim(-35, 35)
         ax.set_ylabel(f"{jj} error (mrad)")
         axu.axhspan(-MARS_DEADBAND_V, MARS_DEADBAND_V, color="tab:green", alpha=0.12, lw=0)
@@ -183,8 +186,9 @@ def plot_mars(spec, runs, metrics, out: Path) -> list[Path]:
     axs[-1, 1].set_xlabel("time (s)")
     m = metrics["emulated"]
     pp = metrics.get("plain_pid")
-    title = (f"MARS-ND: joint PID through {len(set(h['target'] for h in m['holds']))} targets with a "
-             f"{MARS_DEADBAND_V:g} V valve deadband (shaded). Designed: {m['settled_holds']}/{m['n_holds']} holds settled")
+    title = (f"MARS-ND: joint PID through {len(set(h['target'] for h in m['holds']))} targets (right arm mirrored) with a "
+             f"{MARS_DEADBAND_V:g} V valve deadband (shaded right; left: the ±{1e3 * MARS_SETTLED_RAD:g} mrad settled band).\n"
+             f"Designed PID: {m['settled_holds']}/{m['n_holds']} holds settled")
     if pp:
         title += f"; plain PID: {pp['settled_holds']}/{pp['n_holds']}"
     fig.suptitle(title, fontsize=11)

@@ -213,7 +213,8 @@ def analyse_cartesian(spec: RobotSpec, runs: dict[str, dict]) -> dict:
 MARS_DEADBAND_V = 0.8        # V: estimated spool overlap, 8 % of the 10 V command range (HydroLek valves
                              # are not characterised in the source paper; 5-20 % overlap is typical)
 MARS_ARM_JOINTS = ("j1", "j2", "j3", "j4", "j5")                    # sensed (potentiometers)
-MARS_OFFSETS = ((0.25, 0.20, -0.25, 0.30, 0.35),                    # rad from the start pose, per target
+MARS_OFFSETS = ((0.25, 0.20, -0.25, 0.30, 0.35),                    # rad from the start pose, per target (left
+                                                                    # arm; the right arm moves mirrored, -offset)
                 (-0.20, 0.35, 0.15, -0.25, -0.30),
                 (0.0, 0.0, 0.0, 0.0, 0.0))
 MARS_MOVE_TIME = 2.0         # s: quintic transition to each target
@@ -249,7 +250,8 @@ class MarsController(Controller):
 
     def start(self, obs) -> None:
         q0 = obs.angle[self.idx]
-        offs = [np.array([o[MARS_ARM_JOINTS.index(j.split("_", 1)[-1])] for j in self.arm_joints]) for o in MARS_OFFSETS]
+        sign = np.array([-1.0 if j.startswith("right_") else 1.0 for j in self.arm_joints])
+        offs = [sign * np.array([o[MARS_ARM_JOINTS.index(j.split("_", 1)[-1])] for j in self.arm_joints]) for o in MARS_OFFSETS]
         self.seq = TargetSequence(q0, [q0 + o for o in offs], MARS_MOVE_TIME, MARS_HOLD_TIME)
         self.tracker.start(obs, 0.0)
 
