@@ -146,7 +146,11 @@ class ActuatorGeometry:
 
     def parts(self, Rw, ow, p_a, p_b):
         """Instance positions, quaternions, per-axis scales and colours of every actuator part."""
-        pos, quat, scale, col = [], [], [], []
+        return (*self.geometry(Rw, ow), self.colours(p_a, p_b))
+
+    def geometry(self, Rw, ow):
+        """Instance positions, quaternions and per-axis scales (float32) at the body poses ``Rw``, ``ow``."""
+        pos, quat, scale = [], [], []
         if len(self.cyl):
             base, rod_pin = self.mounts(Rw, ow)
             d = rod_pin - base
@@ -154,16 +158,15 @@ class ActuatorGeometry:
             u = d / L[:, None]
             q = quat_z_to(u)
             piston = np.clip(L - self.rod, 1e-4, self.barrel - 1e-4)  # from the base pin
-            segs = (  # (start, end) along the axis from the base pin, radius, colour
-                (np.zeros_like(L), piston, self.r_barrel, pressure_rgb(p_a[self.cyl_act], self.p_supply)),
-                (piston, self.barrel, self.r_barrel, pressure_rgb(p_b[self.cyl_act], self.p_supply)),
-                (piston, L, self.r_rod, np.broadcast_to(STEEL, (len(L), 3))),
+            segs = (  # (start, end) along the axis from the base pin, radius: chamber A, chamber B, rod
+                (np.zeros_like(L), piston, self.r_barrel),
+                (piston, self.barrel, self.r_barrel),
+                (piston, L, self.r_rod),
             )
-            for s0, s1, r, c in segs:
+            for s0, s1, r in segs:
                 pos.append(base + u * (0.5 * (s0 + s1))[:, None])
                 quat.append(q)
                 scale.append(np.stack([r, r, np.maximum(s1 - s0, 1e-4)], axis=1))
-                col.append(c)
             # lugs: joint axis -> each pin (the linkage triangle that turns stroke into rotation)
             pivot = ow[self.cyl_body]
             for pin in (base, rod_pin):
@@ -172,18 +175,30 @@ class ActuatorGeometry:
                 pos.append(pivot + 0.5 * d)
                 quat.append(quat_z_to(d / n[:, None]))
                 scale.append(np.stack([self.r_lug, self.r_lug, n], axis=1))
-                col.append(np.broadcast_to(LUG, (len(n), 3)))
         if len(self.rot):
             i = self.rot_body
             ax = np.einsum("nij,nj->ni", Rw[i], self.axis[i])
             q = quat_z_to(ax)
-            for sign, p in ((1.0, p_a), (-1.0, p_b)):
+            for sign in (1.0, -1.0):  # port A disc, port B disc
                 pos.append(ow[i] + sign * ax * (0.5 * self.rot_h)[:, None])
                 quat.append(q)
                 scale.append(np.stack([self.rot_r, self.rot_r, self.rot_h], axis=1))
-                col.append(pressure_rgb(p[self.rot_act], self.p_supply))
         return (np.concatenate(pos).astype(np.float32), np.concatenate(quat).astype(np.float32),
-                np.concatenate(scale).astype(np.float32), np.concatenate(col).astype(np.uint8))
+                np.concatenate(scale).astype(np.float32))
+
+    def colours(self, p_a, p_b) -> np.ndarray:
+        """Instance colours (uint8 RGB): chambers and ports by pressure, rods and lugs fixed."""
+        nc, nr = len(self.cyl), len(self.rot)
+        if not hasattr(self, "_col"):
+            self._col = np.zeros((self.n_instances, 3), dtype=np.uint8)
+            self._col[2 * nc:3 * nc] = STEEL
+            self._col[3 * nc:5 * nc] = LUG
+        p = np.concatenate([p_a[self.cyl_act], p_b[self.cyl_act], p_a[self.rot_act], p_b[self.rot_act]])
+        rgb = pressure_rgb(p, self.p_supply)
+        col = self._col.copy()
+        col[:2 * nc] = rgb[:2 * nc]
+        col[5 * nc:] = rgb[2 * nc:]
+        return col
 
 
 class ArmScene:
@@ -317,13 +332,12 @@ class ArmScene:
                 self._sent_q[moved] = q[moved]
                 self.pose_messages += int(moved.sum())
             if self.batch is not None:
-                Rw, ow = self.model.frames(self._sent_q)
-                pos, quat, scale, col = self.actuators.parts(Rw, ow, p_a, p_b)
                 if moved.any():
+                    pos, quat, scale = self.actuators.geometry(*self.model.frames(self._sent_q))
                     self.batch.batched_positions = pos
                     self.batch.batched_wxyzs = quat
                     self.batch.batched_scales = scale
-                self.batch.batched_colors = col  # viser sends it only if a colour changed
+                self.batch.batched_colors = self.actuators.colours(p_a, p_b)  # sent only if a colour changed
             self.last_q = q
             self.updates += 1
             self.last_update = time.monotonic()
