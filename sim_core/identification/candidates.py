@@ -73,6 +73,14 @@ class Candidate:
     def param_names(self) -> list[str]:
         return [fp.key.split(".")[-1] for fp in self.free]
 
+    def start(self, fp: FreeParameter) -> float | None:
+        """Where a new effect's parameter starts: where the effect vanishes (its null, or the search
+        bound on that side), so the first point of the fit is the model without the effect."""
+        null = fp.null
+        if null is None or math.isnan(null):
+            return None
+        return min(max(null, fp.lower), fp.upper)
+
     def prepare(self, spec):
         """``spec`` with the effect switched on at its starting values (refit ones keep theirs)."""
         s = spec.copy()
@@ -80,7 +88,10 @@ class Candidate:
         params = dict(inst.params) if inst is not None else {}
         params.update(self.fixed)
         for fp in self.free:
-            params.setdefault(fp.key.split(".")[-1], fp.get(s))
+            name = fp.key.split(".")[-1]
+            if inst is None and self.start(fp) is not None:
+                params[name] = self.start(fp)
+            params.setdefault(name, fp.get(s))
         s.enable_effect(self.effect, self.joint, **params)
         return s
 

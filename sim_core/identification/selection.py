@@ -129,7 +129,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
     grid = [list(p) + rest for p in cand.grid]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
-                 uncertainty=False, tol=1e-3, start_cost=base_grid_cost if not cand.existing and not accepted else None)
+                 uncertainty=False, tol=1e-3)
     out = st.val_runner.simulate(res.spec, st.val.n)
     fits = st.val.fits(out)
     base_fits = st.val.fits(base_out)
