@@ -24,11 +24,19 @@ def test_every_effect_is_hidden_in_some_case():
     assert {c.robot for c in CASES} == {"hydrolek", "harvester"}
 
 
-def run_case(cli, case, tmp_path):
+def run_case(cli, case, tmp_path, artifacts=None):
     meas, truth = generate(cli, case, tmp_path)
     proc = cli("diagnose", "--robot", case.robot, meas, "--report", tmp_path / "rep", "--quiet")
     assert proc.returncode == 0, proc.stderr
-    return meas, truth, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    if artifacts is not None:   # the confusion matrix of the README is compiled from these lines
+        with open(artifacts / "diagnose_cases.jsonl", "a") as fh:
+            fh.write(json.dumps({"case": case.name, "robot": case.robot, "truth": truth, "verdict": d["verdict"],
+                                 "selected": [{k: s[k] for k in ("effect", "joint", "params", "gain")} for s in d["selected"]],
+                                 "runner_up": d["selected"][0].get("runner_up") if d["selected"] else None,
+                                 "best_rejected_gain": max([c["gain"] for c in d["candidates"] if not c["accepted"]], default=None),
+                                 "seconds": d["timings_s"]["total"]}) + "\n")
+    return meas, truth, d
 
 
 def check_contract(d, robot, sensed):
@@ -52,8 +60,8 @@ def sensed_columns(csv):
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
-def test_hidden_effect_is_found(cli, case, tmp_path):
-    meas, truth, d = run_case(cli, case, tmp_path)
+def test_hidden_effect_is_found(cli, case, tmp_path, artifacts):
+    meas, truth, d = run_case(cli, case, tmp_path, artifacts)
     check_contract(d, case.robot, sensed_columns(meas))
     (name, joint, vals), = truth
     assert d["verdict"] == "discrepancy"
@@ -67,8 +75,8 @@ def test_hidden_effect_is_found(cli, case, tmp_path):
 
 
 @pytest.mark.parametrize("case", CLEAN, ids=[c.name for c in CLEAN])
-def test_clean_data_has_no_significant_discrepancy(cli, case, tmp_path):
-    meas, _, d = run_case(cli, case, tmp_path)
+def test_clean_data_has_no_significant_discrepancy(cli, case, tmp_path, artifacts):
+    meas, _, d = run_case(cli, case, tmp_path, artifacts)
     check_contract(d, case.robot, sensed_columns(meas))
     assert d["verdict"] == "no_significant_discrepancy"
     assert d["selected"] == []
@@ -77,8 +85,8 @@ def test_clean_data_has_no_significant_discrepancy(cli, case, tmp_path):
 
 
 @pytest.mark.parametrize("case", TWO, ids=[c.name for c in TWO])
-def test_two_hidden_effects_are_both_named(cli, case, tmp_path):
-    meas, truth, d = run_case(cli, case, tmp_path)
+def test_two_hidden_effects_are_both_named(cli, case, tmp_path, artifacts):
+    meas, truth, d = run_case(cli, case, tmp_path, artifacts)
     check_contract(d, case.robot, sensed_columns(meas))
     named = {(s["effect"], s["joint"]): s for s in d["selected"]}
     for name, joint, vals in truth:
