@@ -61,6 +61,9 @@ class InProcessServer:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.token = token
+        # as `hydrohil serve` does: the process's threads hand the GIL over every 0.5 ms
+        self._switch = sys.getswitchinterval()
+        sys.setswitchinterval(0.0005)
         cfg = ServiceConfig(robot=robot, can=None, port=self.port, viewer_port=free_port() if viewer else None,
                             recordings_dir=str(tmp / "recordings"), token=token)
         self.svc = HilService(cfg)
@@ -80,6 +83,7 @@ class InProcessServer:
             wait_for(lambda: self.svc.state()["tick"] > 50, 60, "the engine to run")
         except BaseException:
             self.svc.close()
+            sys.setswitchinterval(self._switch)
             raise
 
     def headers(self) -> dict:
@@ -89,6 +93,7 @@ class InProcessServer:
         self.server.should_exit = True
         self.thread.join(10)
         self.svc.close()
+        sys.setswitchinterval(self._switch)
 
 
 class ServeProcess:

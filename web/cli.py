@@ -19,6 +19,7 @@ def register(sub):
 
 def run(args) -> int:
     import signal
+    import sys
     import threading
 
     from sim_core.cli import CliError
@@ -29,6 +30,9 @@ def run(args) -> int:
     logging.basicConfig(level=getattr(logging, args.log_level.upper(), logging.INFO),
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     log = logging.getLogger("hydrohil.view")
+    # stream reader, render thread and viser's event loop share the GIL: hand it over every 0.5 ms
+    # (as hydrohil serve does) rather than every 5 ms
+    sys.setswitchinterval(0.0005)
     rate = args.rate or DEFAULT_RATE_HZ
     try:
         # the stream runs faster than the renderer, so (almost) every frame has a fresh state
