@@ -188,7 +188,7 @@ class ActuatorGeometry:
 
     def colours(self, p_a, p_b) -> np.ndarray:
         """Instance colours (uint8 RGB): chambers and ports by pressure, rods and lugs fixed."""
-        nc, nr = len(self.cyl), len(self.rot)
+        nc = len(self.cyl)
         if not hasattr(self, "_col"):
             self._col = np.zeros((self.n_instances, 3), dtype=np.uint8)
             self._col[2 * nc:3 * nc] = STEEL
