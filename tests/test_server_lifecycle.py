@@ -108,3 +108,38 @@ def test_without_realtime_priority_it_runs_and_says_so(tmp_path):
 def test_serve_rejects_bad_options(cli, args, message):
     proc = cli("serve", "--viewer-port", "0", "--port", "0", *args, timeout=120)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+
+
+def test_a_closed_log_pipe_does_not_kill_the_server():
+    """A supervisor that stops reading the server's output (closed pipe) must not kill the plant:
+    the next log line would raise SIGPIPE if the CLI had set it to its default action."""
+    import socket
+
+    from server_helpers import free_port
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "sim_core.cli", "serve", "--robot", "hydrolek", "--port", str(port),
+                             "--can", "none", "--viewer-port", "0", "--recordings", "/tmp/hydrohil-pipe-test"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        for _ in range(600):
+            try:
+                if httpx.get(url + "/api/v1/health", timeout=1).json()["engine_alive"]:
+                    break
+            except (httpx.HTTPError, ValueError):
+                time.sleep(0.2)
+        proc.stdout.close()                        # nobody reads the log any more
+        for _ in range(5):                         # uvicorn logs a warning for each invalid request
+            with socket.create_connection(("127.0.0.1", port), timeout=2.0) as sock:
+                sock.sendall(b"THIS IS NOT HTTP\r\n\r\n")
+                try:
+                    sock.recv(100)
+                except TimeoutError:
+                    pass
+        time.sleep(1.0)
+        assert proc.poll() is None, f"server died (exit {proc.returncode})"
+        assert httpx.get(url + "/api/v1/health", timeout=5).json()["engine_alive"]
+    finally:
+        proc.terminate()
+        proc.wait(30)

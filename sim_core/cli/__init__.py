@@ -28,10 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import signal
-
-    if hasattr(signal, "SIGPIPE"):
-        signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # 'hydrohil effects | head' exits quietly
+    # SIGPIPE stays ignored (Python's default): a client that drops its socket must never kill
+    # 'hydrohil serve'. A closed stdout ('hydrohil effects | head') is handled below instead.
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -42,6 +40,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
     return int(rc or 0)
 
 
