@@ -20,15 +20,6 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-# ``hydrohil serve`` through the hydrohil command's own parser and plugin, but without ``main()``'s
-# ``signal(SIGPIPE, SIG_DFL)``: with that disposition any peer that drops a socket while the server
-# writes (a CAN client closing while cyclic feedback is under way, an HTTP client timing out) kills the
-# whole server with SIGPIPE instead of raising EPIPE. Reported; remove once sim_core.cli.main keeps
-# SIGPIPE ignored for serve.
-_LAUNCH = ("import sys; from sim_core.cli import build_parser; a = build_parser().parse_args(sys.argv[1:]); "
-           "sys.exit(a.func(a))")
-
-
 class EmulatorProcess:
     """``hydrohil serve --robot R --port P --can socketcand:C --viewer-port 0 --mode M ...`` as a child
     process; REST on ``rest_port`` (used only to reset between runs), CAN (socketcand) on ``can_port``."""
@@ -43,7 +34,7 @@ class EmulatorProcess:
         self.url = f"http://127.0.0.1:{self.rest_port}"
         workdir = Path(workdir)
         workdir.mkdir(parents=True, exist_ok=True)
-        cmd = [sys.executable, "-c", _LAUNCH, "serve", "--robot", robot, "--port", str(self.rest_port),
+        cmd = [sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(self.rest_port),
                "--can", f"socketcand:{self.can_port}", "--viewer-port", "0", "--mode", mode, "--rate", f"{rate_hz:g}",
                "--feedback-rate", f"{feedback_rate_hz:g}", "--watchdog-ms", f"{watchdog_ms:g}",
                "--recordings", str(workdir / "recordings"), "--log-level", "warning"]
