@@ -4,7 +4,6 @@ in-process comparison runs, metrics and figures."""
 from __future__ import annotations
 
 import json
-import logging
 import subprocess
 import sys
 import time
@@ -16,8 +15,6 @@ from .plant_local import LocalPlant, configured_spec
 from .scenarios import ANALYSE, SCENARIOS, make_controller
 from .server import EmulatorProcess
 from .tracking import run_loop
-
-log = logging.getLogger("hydrohil.reproduce")
 
 
 def write_params(scenario, out: Path) -> Path | None:

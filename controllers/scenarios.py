@@ -8,8 +8,10 @@ metrics computed from their traces.
 * ``cartesian`` Fig. 15: the operator's Cartesian velocity command for a ~5 m path is integrated,
                 resolved into joint motions by inverse kinematics and tracked by PID + feedforward.
 * ``mars_nd``   MARS-ND: joint-space PID moving every sensed HydroLek joint of both arms through a set
-                of targets with an 8 % valve overlap (deadband) switched on, settling without limit
-                cycles; a plain PID run on the same plant shows the hunting it avoids.
+                of targets with an estimated 8 % valve overlap (deadband) switched on, settling
+                without limit cycles; the plain PID with the same gains on the same plant shows what
+                the deadband does without the measures (it parks off target while its integral
+                crawls through the deadband).
 
 Every scenario's controller runs unchanged on a :class:`~.plant_can.CanPlant` (emulated) or a
 :class:`~.plant_local.LocalPlant` (simulated).
@@ -17,7 +19,7 @@ Every scenario's controller runs unchanged on a :class:`~.plant_can.CanPlant` (e
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,7 +46,6 @@ class Scenario:
     plant_rate_hz: float = PLANT_RATE_HZ
     control_rate_hz: float = CONTROL_RATE_HZ
     local_runs: tuple = ("simulated",)       # in-process runs besides the emulated one
-    notes: dict = field(default_factory=dict)
 
     @property
     def ticks(self) -> int:
