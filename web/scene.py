@@ -6,8 +6,8 @@ fixed joints move as one, exactly as the simulator sees them), nested as the tre
 visual geometry (parsed by yourdfpy, with its materials) hangs under those frames. A pose update
 sends one orientation per moving joint: the joint origin is fixed in its parent, only the rotation
 ``R_tree Rot(axis, q)`` changes. (``viser.extras.ViserUrdf.update_cfg`` re-sends every frame,
-fixed ones included, through trimesh's scene graph: 2 ms for HydroLek and 4.5 ms for MARS-ND per
-update here, against ~0.5 ms for this.)
+fixed ones included, through trimesh's scene graph: 2-7 ms CPU per update here against 0.7-1.4 ms
+for this with actuators; ``python -m web.bench``.)
 
 Actuators: one batched mesh (a unit cylinder instanced, so a whole robot is 4 messages per frame):
 
