@@ -62,8 +62,15 @@ def run_serve(args) -> int:
     app = create_app(svc, start_transports=True)
     server = uvicorn.Server(uvicorn.Config(app, host=cfg.host, port=cfg.port, log_level="warning", access_log=False,
                                            lifespan="on"))
+    # uvicorn handles SIGTERM/SIGINT while serving (graceful shutdown: the lifespan closes the service,
+    # recordings are flushed), then re-raises the signal under the handlers it found. With these no-op
+    # handlers in place a clean stop exits 0 instead of dying by the signal.
+    import signal
+
+    signal.signal(signal.SIGTERM, lambda *_: None)
+    signal.signal(signal.SIGINT, lambda *_: None)
     try:
-        server.run()   # SIGTERM/SIGINT: graceful shutdown -> lifespan closes the service (recordings flushed)
+        server.run()
     finally:
         svc.close()
     if app.state.startup_error:

@@ -11,7 +11,10 @@ router = APIRouter(tags=["commands"])
 @router.put("/api/v1/commands", response_model=CommandResponse, dependencies=[Depends(require_token)])
 async def put_commands(body: CommandRequest, svc=Depends(get_service)):
     """Set command voltages (V) per joint. They hold until changed (no watchdog for REST commands)."""
-    return model_json(CommandResponse, {"applied": svc.set_voltages(body.voltages), "estop": svc.estopped})
+    from ..engine.shared import SRC_REST, SRC_VIEWER
+
+    source = SRC_VIEWER if body.source == "viewer" else SRC_REST
+    return model_json(CommandResponse, {"applied": svc.set_voltages(body.voltages, source), "estop": svc.estopped})
 
 
 @router.get("/api/v1/commands")

@@ -24,6 +24,7 @@ class Strict(BaseModel):
 
 class CommandRequest(Strict):
     voltages: dict[str, float] = Field(description="command voltage per joint (V)", min_length=1)
+    source: Literal["rest", "viewer"] = Field("rest", description="who commands (shown in the state); CAN commands come over CAN")
 
 
 class CommandResponse(BaseModel):

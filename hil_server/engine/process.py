@@ -12,6 +12,7 @@ import logging
 import multiprocessing as mp
 import os
 import pickle
+import signal
 import threading
 import traceback
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from . import shared as S
 log = logging.getLogger("hydrohil.engine")
 
 RT_PRIORITY = 50
+PR_SET_PDEATHSIG = 1
 PR_SET_TIMERSLACK = 29
 
 
@@ -63,8 +65,21 @@ def _normal_priority() -> None:
         pass
 
 
-def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.Layout, conn) -> None:
+def _die_with_parent(parent_pid: int) -> None:
+    """A real-time process must not outlive its service: an orphaned SCHED_FIFO engine would keep
+    spinning and starve the machine. The kernel sends SIGKILL when the parent exits."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except OSError:
+        pass
+    if os.getppid() != parent_pid:   # the parent died before prctl took effect
+        os._exit(1)
+
+
+def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.Layout, conn, parent_pid: int = 0) -> None:
     """Entry point of the engine process."""
+    if parent_pid:
+        _die_with_parent(parent_pid)
     from sim_core.plant import Plant
     from sim_core.simulator import Simulator
 
@@ -203,7 +218,7 @@ class EngineClient:
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._lock = threading.Lock()
-        self.process = ctx.Process(target=engine_main, args=(pickle.dumps(spec), cfg, block.name, layout, child),
+        self.process = ctx.Process(target=engine_main, args=(pickle.dumps(spec), cfg, block.name, layout, child, os.getpid()),
                                    name="hydrohil-engine", daemon=True)
         self.process.start()
         child.close()
