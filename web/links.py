@@ -224,7 +224,7 @@ class RemoteLink:
             if not batch:
                 continue
             try:
-                self._request("PUT", "/api/v1/commands", {"voltages": batch})
+                self._request("PUT", "/api/v1/commands", {"voltages": batch, "source": "viewer"})
             except LinkError as exc:
                 self._report(str(exc))
 
