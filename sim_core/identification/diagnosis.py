@@ -130,6 +130,13 @@ def _pressure_noise(rec: Record) -> dict[str, float]:
 
 def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progress: bool = True,
         log=None, effects: list[str] | None = None) -> Diagnosis:
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):    # see selection.single_blas_thread
+        return _run(spec, rec, val, workers=workers, progress=progress, log=log, effects=effects)
+
+
+def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool, log, effects) -> Diagnosis:
     log = log or (lambda msg: None)
     t_start = time.perf_counter()
     timings: dict = {}

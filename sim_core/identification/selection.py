@@ -240,8 +240,20 @@ _SHARED: dict = {}
 
 
 def _init_worker(shared):
+    single_blas_thread()
     _SHARED.clear()
     _SHARED.update(shared)
+
+
+_LIMITS = []
+
+
+def single_blas_thread() -> None:
+    """One BLAS thread per process: OpenBLAS threads spin after every small least-squares call and
+    take the cores the other candidate fits need (measured: no parallel speed-up without this)."""
+    from threadpoolctl import threadpool_limits
+
+    _LIMITS.append(threadpool_limits(limits=1, user_api="blas"))
 
 
 def _work(index: int):
