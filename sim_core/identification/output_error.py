@@ -73,6 +73,39 @@ class Problem:
         parts = [(self.meas[k] - sim[k]) * (math.sqrt(self.weight[k]) / self.scale[k]) for k in self.meas]
         return np.concatenate(parts)
 
+    def profiled_cost(self, out: Outputs) -> tuple[float, dict[str, float]]:
+        """Cost after the best rescaling of each joint's motion, and those scales.
+
+        A valve-controlled joint's speed is proportional to its flow gain, so scaling the simulated
+        motion (angle about its start, velocity) by a factor is, to first order, re-calibrating the
+        flow gain. Ranking grid points by this cost compares each with its own best calibration: a
+        friction or a deadband that also slows the joint is not penalised for the slowing the
+        baseline calibration already absorbed."""
+        if not out.ok:
+            return FAIL_RESIDUAL ** 2, {}
+        sim = self.simulated(out)
+        cost = 0.0
+        scales = {}
+        for j in self.joints:
+            ya = out.angles[j][0]
+            pairs = [((j, "angle"), sim[(j, "angle")] - ya, self.meas[(j, "angle")] - ya),
+                     ((j, "velocity"), sim[(j, "velocity")], self.meas[(j, "velocity")])]
+            num = den = 0.0
+            for k, x, m in pairs:
+                w = self.weight[k] / self.scale[k] ** 2
+                num += w * float(x @ m)
+                den += w * float(x @ x)
+            a = min(max(num / den, 1.0 / 3.0), 3.0) if den > 0 else 1.0
+            scales[j] = a
+            for k, x, m in pairs:
+                r = m - a * x
+                cost += self.weight[k] * float(r @ r) / self.scale[k] ** 2
+            for ch in ("p_a", "p_b"):
+                if (j, ch) in self.meas:
+                    r = self.meas[(j, ch)] - sim[(j, ch)]
+                    cost += self.weight[(j, ch)] * float(r @ r) / self.scale[(j, ch)] ** 2
+        return cost, scales
+
     def channel_residuals(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
         sim = self.simulated(out)
         return {k: self.meas[k] - sim[k] for k in self.meas}
@@ -138,13 +171,13 @@ def _spec_at(spec, free, x):
 
 
 def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, grid: list[list[float]] | None = None,
-        grid_problem: Problem | None = None, start_cost: float | None = None, max_sims: int = 60,
-        uncertainty: bool = True, tol: float = 1e-4) -> FitResult:
+        grid_problem: Problem | None = None, max_sims: int = 60, uncertainty: bool = True,
+        tol: float = 1e-4) -> FitResult:
     """Fit the values of ``free`` in ``spec`` (a model spec) to the problem's channels.
 
     ``grid``: starting points (physical values, one list per point, in ``free``'s order), ranked on
-    ``grid_problem`` (default: the problem itself; a shorter window is cheaper); the current values
-    are a starting point too, scored ``start_cost`` on the grid problem when that is known."""
+    ``grid_problem`` (default: the problem itself; a shorter window is cheaper) by the
+    flow-gain-profiled cost; the current values are a starting point too."""
     spec = spec.copy()
     x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
     sims = [0]
@@ -170,25 +203,28 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
     starts = [np.array([fp.to_x(v) for fp, v in zip(free, point)]) for point in grid or []]
     try:
         if starts:
+            # rank the starting points by the flow-gain-profiled cost, then start the calibrated
+            # flow gains where the best point's profile put them
             gp = grid_problem or problem
-            costs = []
-            for x in starts:
+            costs, profiles = [], []
+            for x in starts + [x0]:
                 if sims[0] >= max_sims:
                     raise _Budget
                 sims[0] += 1
                 try:
                     out_g = runner.simulate(spec_at(x), gp.n, owned=True)
                 except ValueError:
-                    out_g = None
-                r = gp.residuals(out_g) if out_g is not None else np.full(1, FAIL_RESIDUAL)
-                costs.append(float(r @ r))
-            if start_cost is None:
-                sims[0] += 1
-                r = gp.residuals(runner.simulate(spec_at(x0), gp.n, owned=True))
-                start_cost = float(r @ r)
+                    out_g = Outputs({}, {}, ok=False)
+                c, scales = gp.profiled_cost(out_g)
+                costs.append(c)
+                profiles.append(scales)
             starts.append(x0)
-            costs.append(start_cost)
-            x_start = starts[int(np.argmin(costs))]
+            i = int(np.argmin(costs))
+            x_start = starts[i].copy()
+            for k, fp in enumerate(free):
+                parts = fp.key.split(".")
+                if len(parts) == 4 and parts[0] == "joints" and parts[2:] == ["valve", "rated_flow"] and parts[1] in profiles[i]:
+                    x_start[k] = fp.to_x(fp.from_x(float(x_start[k])) * profiles[i][parts[1]])
         else:
             x_start = x0
         if free:

@@ -122,7 +122,7 @@ def affected_joints(cand: Candidate, targets: list[str]) -> list[str]:
 
 
 def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candidate, dict]],
-             base_out: Outputs, base_cost: float, round_: int = 1, base_grid_cost: float | None = None) -> Evaluation:
+             base_out: Outputs, base_cost: float, round_: int = 1) -> Evaluation:
     """Fit ``cand`` (jointly with the accepted effects and the calibration) and score it."""
     s0 = model_with(base_spec, accepted, cand, {})
     free = free_list(s0, cand, accepted, st.calib_keys)
@@ -259,16 +259,15 @@ def single_blas_thread() -> None:
 def _work(index: int):
     sh = _SHARED
     cand = sh["candidates"][index]
-    ev = evaluate(sh["setting"], cand, sh["base_spec"], sh["accepted"], sh["base_out"], sh["base_cost"], sh["round"],
-                  sh["base_grid_cost"])
+    ev = evaluate(sh["setting"], cand, sh["base_spec"], sh["accepted"], sh["base_out"], sh["base_cost"], sh["round"])
     return index, ev
 
 
 def evaluate_all(st: Setting, cands: list[Candidate], base_spec, accepted, base_out, base_cost, round_: int,
-                 workers: int = 0, progress: bool = True, base_grid_cost: float | None = None) -> list[Evaluation]:
+                 workers: int = 0, progress: bool = True) -> list[Evaluation]:
     """Evaluate candidates in parallel processes (forked: the compiled kernel is inherited)."""
     shared = {"setting": st, "candidates": cands, "base_spec": base_spec, "accepted": accepted,
-              "base_out": base_out, "base_cost": base_cost, "round": round_, "base_grid_cost": base_grid_cost}
+              "base_out": base_out, "base_cost": base_cost, "round": round_}
     workers = workers or min(len(cands), os.cpu_count() or 1)
     order = sorted(range(len(cands)), key=lambda i: -len(cands[i].free) * (1 + len(cands[i].grid)))
     results: list[Evaluation | None] = [None] * len(cands)
@@ -325,7 +324,6 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     for r in range(1, max_effects + 1):
         base_out = st.val_runner.simulate(model, st.val.n)
         base_cost = float(np.sum(st.est.residuals(st.est_runner.simulate(model, st.est.n)) ** 2))
-        grid_cost = float(np.sum(st.grid.residuals(st.est_runner.simulate(model, st.grid.n)) ** 2)) if st.grid else None
         score = float(np.mean([v["score"] for v in st.val.fits(base_out).values()]))
         if r > 1 and ceiling - score < THRESHOLD_POINTS:
             stopped = f"score {score:.1f} within {THRESHOLD_POINTS:g} points of its noise ceiling {ceiling:.1f}"
@@ -333,8 +331,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         if not pool:
             stopped = "no candidates left"
             break
-        evals = evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress,
-                             base_grid_cost=grid_cost)
+        evals = evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress)
         rounds.append(evals)
         ok = [e for e in evals if e.accepted_ok]
         if not ok:
