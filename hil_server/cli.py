@@ -43,6 +43,13 @@ def run_serve(args) -> int:
                         viewer_port=args.viewer_port or None, rate_hz=args.rate, mode=args.mode, params=args.params,
                         token=args.token, watchdog_ms=args.watchdog_ms, feedback_rate_hz=args.feedback_rate,
                         recordings_dir=args.recordings, seed=args.seed, realtime_priority=not args.no_rt)
+    if cfg.can:
+        from .can.transports import probe_transport
+
+        try:
+            probe_transport(cfg.can)
+        except (OSError, ValueError) as exc:
+            raise CliError(str(exc)) from None
     try:
         svc = HilService(cfg)
     except (ServiceError, SpecError) as exc:
@@ -71,6 +78,9 @@ def run_serve(args) -> int:
     signal.signal(signal.SIGINT, lambda *_: None)
     try:
         server.run()
+    except SystemExit:  # uvicorn exits 3 when start-up fails; the reason is in startup_error
+        if not app.state.startup_error:
+            raise
     finally:
         svc.close()
     if app.state.startup_error:

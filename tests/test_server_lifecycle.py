@@ -1,6 +1,7 @@
 """Service lifecycle on real processes: auth, SIGTERM with an open recording, fuzzing, bad options."""
 
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -107,6 +108,21 @@ def test_without_realtime_priority_it_runs_and_says_so(tmp_path):
 def test_serve_rejects_bad_options(cli, args, message):
     proc = cli("serve", "--viewer-port", "0", "--port", "0", *args, timeout=120)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+
+
+def test_a_can_transport_the_host_cannot_give_is_a_clear_error(cli):
+    """No such CAN interface (this machine has no kernel CAN at all) and a socketcand port already
+    taken: exit 2 with the transport named, no traceback."""
+    proc = cli("serve", "--viewer-port", "0", "--port", "0", "--can", "socketcan:nosuchcan0", timeout=120)
+    assert proc.returncode == 2 and "CAN transport 'socketcan:nosuchcan0'" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = cli("serve", "--viewer-port", "0", "--port", "0", "--can", f"socketcand:{port}", timeout=120)
+    assert proc.returncode == 2 and f"CAN transport 'socketcand:{port}'" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
 
 
 def test_the_engine_dies_with_its_service(tmp_path):

@@ -103,3 +103,23 @@ def open_transport(spec: str):
     except OSError as exc:
         raise OSError(f"CAN transport {spec!r} could not be opened: {exc}") from exc
     return PythonCanTransport(t) if isinstance(t, can.BusABC) else t
+
+
+def probe_transport(spec: str) -> None:
+    """Open, start and close the transport once on a throw-away event loop.
+
+    Raises OSError or ValueError naming the transport when the host cannot give it (no kernel CAN,
+    a socketcand port already taken): a clear start-up error before the plant starts, not a
+    traceback from inside the server's event loop."""
+
+    async def once() -> None:
+        t = open_transport(spec)
+        try:
+            await t.start(lambda _msg: None)
+        except OSError as exc:
+            raise OSError(f"CAN transport {spec!r} could not be started: {exc}") from exc
+        finally:
+            await t.close()
+
+    asyncio.run(once())
+
