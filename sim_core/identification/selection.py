@@ -131,6 +131,12 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
                  uncertainty=False, tol=1e-3)
     out = st.val_runner.simulate(res.spec, st.val.n)
+    if not out.ok and st.val_runner.substep is not None:
+        # the fast integrator step was checked on the baseline, not on every fitted candidate: a
+        # candidate that diverges there is scored, like the model it is compared with, at the default step
+        default = Runner(st.val_runner.rec)
+        out = default.simulate(res.spec, st.val.n)
+        base_out = default.simulate(base_spec, st.val.n)
     fits = st.val.fits(out)
     base_fits = st.val.fits(base_out)
     joints = affected_joints(cand, st.val.joints)
@@ -180,6 +186,9 @@ def _judge(ev: Evaluation, res: oe.FitResult) -> None:
             significant += 1
     if not significant and not any("search bound" in r for r in ev.reasons):
         ev.reasons.append(f"no parameter differs from 'no effect' by {SIGNIFICANCE:g} sigma")
+    if not math.isfinite(ev.gain):
+        ev.reasons.append("the fitted model cannot be simulated on the validation data (the state diverged)")
+        return
     need = max(THRESHOLD_POINTS, NOISE_FACTOR * ev.spread)
     if ev.gain < need:
         ev.reasons.append(f"validation gain {ev.gain:.2f} below {need:.2f} points")
