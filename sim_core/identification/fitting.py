@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import output_error as oe
-from .calibration import default_free
+from .calibration import default_free, scan_flow_gains
 from .metrics import noise_std
 from .parameters import FreeParameterError, declared, free_parameter
 from .params_file import overrides, write_params
@@ -92,7 +92,8 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     targets = rec.targets
     prob = oe.Problem(rec, targets)
     fast, numerics = choose_numerics(m0, rec)
-    res = oe.fit(fast, prob, m0, free, max_sims=max_sims, uncertainty=False)
+    start = scan_flow_gains(m0, fast, prob, keys)      # least squares stalls on a jagged cost
+    res = oe.fit(fast, prob, start, free, max_sims=max_sims, uncertainty=False)
     accurate = Runner(rec)
     polish = [free_parameter(res.spec, k, span=1.5) if fp.log else fp for k, fp in zip(keys, free)]
     final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
