@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import socket
 import subprocess
@@ -15,7 +14,7 @@ import httpx
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _die_with_parent() -> None:
+def die_with_parent() -> None:
     """Servers started by a test die with the test process (no orphans if pytest is killed)."""
     import ctypes
 
@@ -31,7 +30,21 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def stop_process(proc: subprocess.Popen, timeout: float = 30.0) -> int:
+    """SIGTERM (a clean stop), then kill after ``timeout``; the exit status."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+    return proc.returncode
+
+
 class ServerProcess:
+    """``hydrohil serve`` as a subprocess (the real console command), ready when its engine runs."""
+
     def __init__(self, *args, robot="hydrolek", can="none", viewer_port=0, tmp_path=None, token=None, extra=()):
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -41,8 +54,9 @@ class ServerProcess:
                "--can", can, "--viewer-port", str(viewer_port), "--recordings", str(self.recordings), *args, *extra]
         if token:
             cmd += ["--token", token]
-        self.log = open(self.recordings.parent / f"serve-{self.port}.log", "w") if tmp_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+        self.log_path = self.recordings.parent / f"serve-{self.port}.log" if tmp_path else None
+        self.log = open(self.log_path, "w") if self.log_path else subprocess.DEVNULL
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT, preexec_fn=die_with_parent)
         self._wait_ready()
 
     def _wait_ready(self, timeout=120.0):
@@ -60,18 +74,16 @@ class ServerProcess:
         self.stop()
         raise TimeoutError("server did not become ready")
 
+    def headers(self) -> dict:
+        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
+
     def client(self, **kw) -> httpx.Client:
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-        return httpx.Client(base_url=self.url, headers=headers, timeout=30.0, **kw)
+        return httpx.Client(base_url=self.url, headers=self.headers(), timeout=30.0, **kw)
 
     def terminate(self, timeout=30.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        return self.proc.returncode
+        rc = stop_process(self.proc, timeout)
+        if self.log_path:
+            self.log.close()
+        return rc
 
-    stop = terminate
+    stop = close = terminate

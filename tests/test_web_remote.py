@@ -8,7 +8,8 @@ import httpx
 import numpy as np
 import pytest
 
-from web_helpers import WINDOW_S, ServeProcess, ViewProcess, ViserProbe, frame_rate, free_port, wait_for
+from server_helpers import ServerProcess
+from web_helpers import WINDOW_S, ViewProcess, ViserProbe, frame_rate, free_port, wait_for
 
 
 def _get(url):
@@ -20,7 +21,7 @@ def _get(url):
 
 def test_serve_starts_the_viewer(tmp_path):
     port = free_port()
-    srv = ServeProcess("harvester", tmp_path, viewer_port=port)
+    srv = ServerProcess(robot="harvester", tmp_path=tmp_path, viewer_port=port)
     try:
         # REST is up; the viewer comes up beside it in the background
         page = wait_for(lambda: _get(f"http://127.0.0.1:{port}/"), 60, "the viewer's page")
@@ -42,7 +43,7 @@ def test_serve_starts_the_viewer(tmp_path):
 
 def test_view_attaches_to_a_remote_server(tmp_path):
     token = "s3cret"
-    srv = ServeProcess("hydrolek", tmp_path, viewer_port=0, token=token)
+    srv = ServerProcess(robot="hydrolek", tmp_path=tmp_path, viewer_port=0, token=token)
     view = None
     try:
         view = ViewProcess(srv.url, tmp_path, token=token)
@@ -76,7 +77,7 @@ def test_remote_link_commands_token_estop_and_connection_state(tmp_path):
     from web.links import LinkError, RemoteLink
 
     token = "t0ken"
-    srv = ServeProcess("hydrolek", tmp_path, viewer_port=0, token=token)
+    srv = ServerProcess(robot="hydrolek", tmp_path=tmp_path, viewer_port=0, token=token)
     links = []
     try:
         # without a token: read-only, and says so

@@ -15,19 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from server_helpers import ROOT, die_with_parent, free_port, stop_process  # noqa: F401 - free_port: for the web tests
+
 ARTIFACTS = ROOT / "artifacts"
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
                  "--no-first-run"]
 VIEWPORT = {"width": 1280, "height": 800}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def artifacts_dir() -> Path:
@@ -96,45 +91,6 @@ class InProcessServer:
         sys.setswitchinterval(self._switch)
 
 
-class ServeProcess:
-    """``hydrohil serve`` as a subprocess (the real console command)."""
-
-    def __init__(self, robot: str, tmp: Path, *, viewer_port: int = 0, token: str | None = None):
-        import httpx
-
-        self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.token = token
-        cmd = [sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(self.port),
-               "--can", "none", "--viewer-port", str(viewer_port), "--recordings", str(tmp / "recordings")]
-        if token:
-            cmd += ["--token", token]
-        self.log_path = tmp / f"serve-{self.port}.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
-
-        def ready():
-            if self.proc.poll() is not None:
-                raise AssertionError(f"hydrohil serve exited ({self.proc.returncode}):\n{self.log_path.read_text()}")
-            try:
-                return httpx.get(self.url + "/api/v1/health", timeout=1.0).json()["engine_alive"]
-            except (httpx.HTTPError, ValueError, KeyError):
-                return False
-
-        try:
-            wait_for(ready, 120, "hydrohil serve", interval=0.2)
-        except BaseException:
-            self.close()
-            raise
-
-    def headers(self) -> dict:
-        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
-
-    def close(self) -> None:
-        stop_process(self.proc)
-        self.log.close()
-
-
 class ViewProcess:
     """``hydrohil view --url ...`` as a subprocess."""
 
@@ -145,7 +101,8 @@ class ViewProcess:
             cmd += ["--token", token]
         self.log_path = tmp / f"view-{self.port}.log"
         self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT)
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT,
+                                     preexec_fn=die_with_parent)
 
         def ready():
             if self.proc.poll() is not None:
@@ -166,17 +123,6 @@ class ViewProcess:
         rc = stop_process(self.proc)
         self.log.close()
         return rc
-
-
-def stop_process(proc: subprocess.Popen, timeout: float = 30.0) -> int:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
-    return proc.returncode
 
 
 # ---- what viser sends a browser ------------------------------------------------------------------------
