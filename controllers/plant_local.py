@@ -17,6 +17,7 @@ import numpy as np
 
 from sim_core.kernel import layout as KL
 from sim_core.model.spec import RobotSpec, load_robot
+from sim_core.params_file import apply_params_file
 from sim_core.plant import Plant
 from sim_core.simulator import Simulator
 
@@ -27,9 +28,7 @@ def configured_spec(robot: str, params: str | Path | None = None) -> RobotSpec:
     """The robot's spec with a parameter/effect file applied, as ``hydrohil serve --params`` does."""
     spec = load_robot(robot)
     if params:
-        from sim_core.cli.common import read_params_file
-
-        spec.apply_overrides(read_params_file(str(params)), where=f"--params {params}")
+        apply_params_file(spec, params)
     return spec
 
 

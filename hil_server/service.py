@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim_core.cli.common import read_params_file
+from sim_core.params_file import ParamsFileError, apply_params_file
 from sim_core.effects import catalog
 from sim_core.model.spec import RobotSpec, SpecError, load_robot
 
@@ -73,7 +73,10 @@ class HilService:
         self.cfg = cfg
         spec = load_robot(cfg.robot)
         if cfg.params:
-            spec.apply_overrides(read_params_file(cfg.params), where=f"--params {cfg.params}")
+            try:
+                apply_params_file(spec, cfg.params)
+            except ParamsFileError as exc:
+                raise ServiceError(str(exc)) from None
         self.spec: RobotSpec = spec       # mirror of the engine's parameters, validated here first
         self.channels = ChannelMap(spec)
         self.joint_index = {j: a for a, j in enumerate(spec.joint_names)}

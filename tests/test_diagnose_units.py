@@ -9,7 +9,7 @@ import pytest
 from sim_core.effects import EFFECTS
 from sim_core.identification.candidates import bank
 from sim_core.identification.metrics import fit_ceiling, noise_std, nrmse_fit
-from sim_core.identification.params_file import overrides
+from sim_core.params_file import overrides
 from sim_core.identification.residual_tests import correlation_band, cross_correlation, ljung_box
 from sim_core.identification.signatures import joint_signatures
 

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import json
-import tomllib
-from pathlib import Path
 
 from ..model.spec import RobotSpec, SpecError, load_robot
+from ..params_file import ParamsFileError, apply_params_file
 from . import CliError
 
 
@@ -45,17 +44,6 @@ def parse_effect(text: str) -> tuple[str, str | None, dict]:
     return name, joint, params
 
 
-def read_params_file(path: str) -> dict:
-    p = Path(path)
-    try:
-        with open(p, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise CliError(f"--params {path}: no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise CliError(f"--params {path}: invalid TOML: {exc}") from None
-
-
 def add_model_options(p) -> None:
     p.add_argument("--effect", action="append", default=[], metavar="NAME:joint=J,param=value",
                    help="switch an effect on (repeatable); see 'hydrohil effects'")
@@ -69,7 +57,7 @@ def load_configured_robot(args) -> RobotSpec:
     spec = load_robot(args.robot)
     try:
         if getattr(args, "params", None):
-            spec.apply_overrides(read_params_file(args.params), where=f"--params {args.params}")
+            apply_params_file(spec, args.params)
         for item in getattr(args, "set", []) or []:
             path, eq, val = item.partition("=")
             if not eq:
@@ -78,6 +66,6 @@ def load_configured_robot(args) -> RobotSpec:
         for item in getattr(args, "effect", []) or []:
             name, joint, params = parse_effect(item)
             spec.enable_effect(name, joint, **params)
-    except SpecError as exc:
+    except (SpecError, ParamsFileError) as exc:
         raise CliError(str(exc)) from None
     return spec

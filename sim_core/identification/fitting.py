@@ -14,7 +14,7 @@ from . import output_error as oe
 from .calibration import default_free, scan_flow_gains
 from .metrics import noise_std
 from .parameters import FreeParameterError, declared, free_parameter
-from .params_file import overrides, write_params
+from ..params_file import overrides, write_params
 from .record import Record
 from .simulation import Runner, choose_numerics, model_spec
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..effects import EFFECTS
 from .diagnosis import Diagnosis
-from .params_file import overrides, write_params
+from ..params_file import overrides, write_params
 from .residual_tests import autocorrelation
 
 # where each effect typically shows (the legend of the highlighted evidence)

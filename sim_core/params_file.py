@@ -1,19 +1,49 @@
-"""Parameter/effect files (the ``--params`` format) written by ``fit`` and ``diagnose``.
+"""Parameter/effect files (the ``--params`` format): the one reader and writer.
 
 The file holds everything that differs from the robot's built-in spec, so ``hydrohil simulate
 --params`` and ``hydrohil serve --params`` rebuild exactly the fitted model from the robot's name:
 changed parameter paths, effects switched on or changed, effects of the built-in spec switched off
 (``enabled = false``), and a ``[diagnosis]`` table with the provenance (ignored when loading).
+``fit`` and ``diagnose`` write it; the CLI, the HIL service and the controllers read it here.
 """
 
 from __future__ import annotations
 
 import math
+import tomllib
 from pathlib import Path
 
 import tomli_w
 
-from ..model.spec import load_robot
+from .model.spec import RobotSpec, SpecError, load_robot
+
+
+class ParamsFileError(ValueError):
+    """A parameter file cannot be read or does not fit the robot (the message names the file)."""
+
+
+def read_params_file(path: str | Path) -> dict:
+    """The parsed TOML of a parameter file; :class:`ParamsFileError` naming the file otherwise."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ParamsFileError(f"--params {path}: no such file") from None
+    except IsADirectoryError:
+        raise ParamsFileError(f"--params {path}: is a directory, not a TOML file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParamsFileError(f"--params {path}: invalid TOML: {exc}") from None
+
+
+def apply_params_file(spec: RobotSpec, path: str | Path) -> RobotSpec:
+    """Apply the file's ``[parameters]`` and ``[[effects]]`` to ``spec`` (in place, returned)."""
+    data = read_params_file(path)
+    try:
+        spec.apply_overrides(data, where=f"--params {path}")
+    except SpecError as exc:
+        raise ParamsFileError(str(exc)) from None
+    return spec
 
 
 def _same(a, b) -> bool:
