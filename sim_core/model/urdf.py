@@ -1,13 +1,15 @@
 """URDF -> kinematic tree arrays for the rigid-body kernel.
 
 The simulator, the Pinocchio oracle in the tests and the 3D viewer all read the same URDF, so the
-robot geometry has one source of truth. Only what a serial/branched arm of revolute joints needs is
-supported: ``revolute`` and ``fixed`` joints (``continuous`` is treated as revolute without
-limits). Bodies joined by fixed joints are merged into their moving parent, as Pinocchio does.
+robot geometry has one source of truth. Supported joints: ``revolute``, ``prismatic`` and ``fixed``
+(``continuous`` is treated as revolute without limits). Bodies joined by fixed joints are merged into
+their moving parent, as Pinocchio does.
 
 Conventions: body ``i`` is the child of moving joint ``i``; its frame is the joint frame (URDF joint
-origin, then rotation ``q_i`` about the joint axis). Joints are ordered so that every parent comes
-before its children (``parent[i] < i``; ``-1`` is the fixed root/world body).
+origin), then rotated by ``q_i`` (rad) about the joint axis for a revolute joint, or translated by
+``q_i`` (m) along the axis for a prismatic one (``jtype[i]``: :data:`REVOLUTE` or :data:`PRISMATIC`).
+Joints are ordered so that every parent comes before its children (``parent[i] < i``; ``-1`` is the
+fixed root/world body).
 """
 
 from __future__ import annotations
@@ -17,6 +19,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+
+REVOLUTE = 0   #: ``KinematicTree.jtype`` of a revolute (or continuous) joint: q in rad
+PRISMATIC = 1  #: ``KinematicTree.jtype`` of a prismatic joint: q in m
+
+_JTYPE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 
 
 class UrdfError(ValueError):
@@ -84,21 +92,32 @@ class KinematicTree:
     parent: np.ndarray              # int64 [n], -1 = fixed root body
     R_tree: np.ndarray              # [n,3,3] joint frame orientation in parent body frame
     p_tree: np.ndarray              # [n,3]   joint frame origin in parent body frame (m)
-    axis: np.ndarray                # [n,3]   unit joint axis in joint frame
+    axis: np.ndarray                # [n,3]   unit joint axis in joint frame (rotation or translation)
     mass: np.ndarray                # [n]     body mass (kg), fixed children merged
     com: np.ndarray                 # [n,3]   centre of mass in body frame (m)
     inertia: np.ndarray             # [n,3,3] inertia about the COM in body frame (kg m^2)
-    lower: np.ndarray               # [n] joint limit (rad), -inf if none
-    upper: np.ndarray               # [n] joint limit (rad), +inf if none
-    damping: np.ndarray             # [n] viscous joint damping (N m s/rad)
+    lower: np.ndarray               # [n] joint limit (rad; m for prismatic), -inf if none
+    upper: np.ndarray               # [n] joint limit (rad; m for prismatic), +inf if none
+    damping: np.ndarray             # [n] viscous joint damping (N m s/rad; N s/m for prismatic)
     root_link: str
     # every URDF link -> (body index or -1 for the root, R, p) of its frame in that body's frame
     link_frames: dict[str, tuple[int, np.ndarray, np.ndarray]]
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
+    jtype: np.ndarray | None = None  # int64 [n]: REVOLUTE or PRISMATIC; None means all revolute
+
+    def __post_init__(self) -> None:
+        if self.jtype is None:
+            self.jtype = np.full(len(self.dof_names), REVOLUTE, dtype=np.int64)
+        self.jtype = np.ascontiguousarray(self.jtype, dtype=np.int64)
 
     @property
     def n(self) -> int:
         return len(self.dof_names)
+
+    def is_prismatic(self, dof: int | str) -> bool:
+        """Whether a joint (index or name) translates (q in m) rather than rotates (q in rad)."""
+        i = self.index(dof) if isinstance(dof, str) else dof
+        return bool(self.jtype[i] == PRISMATIC)
 
     def index(self, dof: str) -> int:
         try:
@@ -134,8 +153,8 @@ def _parse_link(el) -> _Link:
 def _parse_joint(el) -> _Joint:
     name = el.get("name")
     jtype = el.get("type")
-    if jtype not in ("revolute", "continuous", "fixed"):
-        raise UrdfError(f"joint {name!r}: type {jtype!r} is not supported (revolute, continuous, fixed)")
+    if jtype not in ("revolute", "continuous", "prismatic", "fixed"):
+        raise UrdfError(f"joint {name!r}: type {jtype!r} is not supported (revolute, continuous, prismatic, fixed)")
     R, p = _origin(el)
     axis = _vec(el.find("axis").get("xyz") if el.find("axis") is not None else None, (1.0, 0.0, 0.0))
     if jtype != "fixed":
@@ -145,7 +164,7 @@ def _parse_joint(el) -> _Joint:
         axis = axis / nrm
     lower, upper = -np.inf, np.inf
     lim = el.find("limit")
-    if jtype == "revolute" and lim is not None:
+    if jtype in ("revolute", "prismatic") and lim is not None:
         lower = float(lim.get("lower", "-inf"))
         upper = float(lim.get("upper", "inf"))
         if not lower < upper:
@@ -179,7 +198,7 @@ def load_urdf(source: str | Path, *, from_string: bool = False) -> KinematicTree
     root_link = roots[0]
 
     dof_names, link_names, parent = [], [], []
-    R_tree, p_tree, axis, lower, upper, damping = [], [], [], [], [], []
+    R_tree, p_tree, axis, lower, upper, damping, jtypes = [], [], [], [], [], [], []
     mass, com, inertia = [], [], []
     link_frames: dict[str, tuple[int, np.ndarray, np.ndarray]] = {root_link: (-1, np.eye(3), np.zeros(3))}
     # body accumulators: (mass, first moment, inertia about body origin) in body frame
@@ -212,6 +231,7 @@ def load_urdf(source: str | Path, *, from_string: bool = False) -> KinematicTree
                 lower.append(j.lower)
                 upper.append(j.upper)
                 damping.append(j.damping)
+                jtypes.append(_JTYPE[j.type])
                 acc.append([0.0, np.zeros(3), np.zeros((3, 3))])
                 link_frames[j.child] = (idx, np.eye(3), np.zeros(3))
                 add_mass(idx, links[j.child], np.eye(3), np.zeros(3))
@@ -245,4 +265,5 @@ def load_urdf(source: str | Path, *, from_string: bool = False) -> KinematicTree
         damping=np.array(damping),
         root_link=root_link,
         link_frames=link_frames,
+        jtype=np.array(jtypes, dtype=np.int64),
     )
