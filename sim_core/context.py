@@ -11,9 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from .components.chambers import P_A, P_B
+from .components.potentiometer import SENS_ANGLE
+from .components.pump import P_S, P_SUPPLY, P_TANK, SUPPLY_SAG
 from .dynamics.rigid_body import RigidBodyModel
+from .effects import EFFECTS
 from .kernel import layout as L
-from .lowering import Lowered, lower
+from .lowering import KIND_CLASS, Lowered, lower
 from .model.spec import RobotSpec
 
 HISTORY_CAPACITY = 8192  # command events kept for the delay line (0.8 s at 10 kHz)
@@ -84,34 +88,49 @@ class Context:
             z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
             self.rng[0] = np.uint64((z ^ (z >> 31)) or 1)
         GP, AP = lw.GP, lw.AP
-        self.XG[L.XG_P_S] = GP[L.GP_P_SUPPLY] * GP[L.GP_SUPPLY_SAG]
+        self.XG[P_S] = GP[P_SUPPLY] * GP[SUPPLY_SAG]
         gravity = self.rigid_body().inverse_dynamics(q, np.zeros(tree.n), np.zeros(tree.n))
-        p_s, p_t = GP[L.GP_P_SUPPLY], GP[L.GP_P_TANK]
+        p_s, p_t = GP[P_SUPPLY], GP[P_TANK]
         pm = 0.5 * (p_s + p_t)
         for a, js in enumerate(self.spec.joints):
             dof = int(AP[a, L.AP_DOF])
             tau = gravity[dof]
-            if AP[a, L.AP_KIND] == 0.0:
-                c0, d1, d2 = AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2]
-                Ln = np.sqrt(c0 - 2 * (d1 * np.cos(q[dof]) + d2 * np.sin(q[dof])))
-                arm = (d1 * np.sin(q[dof]) - d2 * np.cos(q[dof])) / Ln
-                F = tau / arm
-                A_a, A_b = AP[a, L.AP_AREA_A], AP[a, L.AP_AREA_B]
-                lam = (F - pm * (A_a - A_b)) / (A_a ** 2 + A_b ** 2)
-                pa, pb = pm + lam * A_a, pm - lam * A_b
-            else:
-                dp = tau / AP[a, L.AP_AREA_A]
-                pa, pb = pm + 0.5 * dp, pm - 0.5 * dp
-            pa, pb = float(np.clip(pa, p_t, p_s)), float(np.clip(pb, p_t, p_s))
-            self.XS[a, L.XS_P_A] = self.XS[a, L.XS_PH_A] = pa
-            self.XS[a, L.XS_P_B] = self.XS[a, L.XS_PH_B] = pb
-            th = q[dof]
-            if AP[a, L.AP_E_COMPLIANCE] != 0.0:
-                th = q[dof] + tau / AP[a, L.AP_COMP_K]  # spring pre-loaded with the gravity torque
-            self.XS[a, L.XS_TH_A] = th
-            self.XS[a, L.XS_Y_BACK] = q[dof]
-            self.XS[a, L.XS_CURSOR] = -1.0
-            self.XS[a, L.XS_SENS_ANGLE] = q[dof]
+            pa, pb = KIND_CLASS[js.kind].holding_pressures(AP[a], q[dof], tau, pm)
+            self.XS[a, P_A] = float(np.clip(pa, p_t, p_s))
+            self.XS[a, P_B] = float(np.clip(pb, p_t, p_s))
+            self.XS[a, SENS_ANGLE] = q[dof]
+            for eff in EFFECTS.values():
+                eff.reset(self, a, q[dof], tau, self.effect_on(eff, a))
+
+    def effect_on(self, eff, a: int) -> bool:
+        """Whether effect class ``eff`` is switched on for actuator ``a`` (or globally)."""
+        if eff.switch:
+            return (self.GP[eff.switch_column] if eff.scope == "global" else self.AP[a, eff.switch_column]) != 0.0
+        joint = self.spec.joint_names[a]
+        return any(e.name == eff.name and e.joint in (joint, None) for e in self.spec.effects)
+
+    def chamber_volumes(self, a: int) -> tuple[float, float]:
+        """(V_A, V_B) of actuator ``a`` at its current position (m^3)."""
+        from .effects.joint_compliance import TH_A
+
+        th = self.XS[a, TH_A]
+        return KIND_CLASS[self.spec.joints[a].kind].chamber_volumes(self.AP[a], th)
+
+    def bulk_functions(self):
+        """(beta, f(p)): the oil's bulk modulus (Pa) and its pressure factor with the effects on."""
+        from .effects.bulk_modulus import BULK_PAIR, BULK_SCALE, BulkModulus
+        from .components.fluid import ATM, BETA
+
+        GP = self.GP
+        on = GP[BulkModulus.switch_column] != 0.0
+
+        def f(p):
+            if not on:
+                return 1.0
+            pa = max(p + GP[ATM], 1e3)
+            return GP[BULK_SCALE] / (1.0 + GP[BULK_PAIR] / pa)
+
+        return GP[BETA], f
 
     # ---- parameters -------------------------------------------------------------------------
     def _relower(self) -> None:
@@ -187,34 +206,25 @@ class Context:
         self._relower()
 
 
+def _fault_owners() -> dict:
+    """Fault kind -> the lowering function of the component it breaks."""
+    from .components import Hose, Potentiometer, Pump, Spool, chambers
+
+    owners = {}
+    for owner, lower_fault in ((Potentiometer, Potentiometer.lower_fault), (Spool, Spool.lower_fault),
+                               (chambers, chambers.lower_fault), (Hose, Hose.lower_fault), (Pump, Pump.lower_fault)):
+        for kind in owner.FAULTS:
+            owners[kind] = lower_fault
+    return owners
+
+
 FAULT_KINDS = ("sensor_stuck", "sensor_noisy", "sensor_offset", "spool_stuck", "leak", "hose_burst", "supply_sag")
 
 
 def _apply_fault(lw: Lowered, spec: RobotSpec, key: tuple[str, str], mode: dict) -> None:
     joint, kind = key
-    AP, GP = lw.AP, lw.GP
-    if kind == "supply_sag":
-        GP[L.GP_SUPPLY_SAG] = float(mode.get("factor", 0.7))
-        return
-    a = spec.joint_names.index(joint)
-    if kind == "sensor_stuck":
-        AP[a, L.AP_F_SENS_MODE] = 1.0
-        AP[a, L.AP_F_SENS_VALUE] = float(mode["value"])
-    elif kind == "sensor_noisy":
-        AP[a, L.AP_F_SENS_MODE] = 2.0
-        AP[a, L.AP_F_SENS_NOISE] = float(mode.get("std", 0.05))
-    elif kind == "sensor_offset":
-        AP[a, L.AP_F_SENS_OFFSET] = float(mode.get("offset", 0.2))
-    elif kind == "spool_stuck":
-        AP[a, L.AP_F_SPOOL_STUCK] = 1.0
-        AP[a, L.AP_F_SPOOL_POS] = float(mode.get("position", 0.0))
-    elif kind == "leak":
-        c = float(mode.get("coefficient", 1e-11))
-        if mode.get("chamber", "a") in ("a", "both"):
-            AP[a, L.AP_F_LEAK_A] = c
-        if mode.get("chamber", "a") in ("b", "both"):
-            AP[a, L.AP_F_LEAK_B] = c
-    elif kind == "hose_burst":
-        AP[a, L.AP_F_BURST_KV] = float(mode.get("flow_coefficient", 5.0 * AP[a, L.AP_KV]))
-    else:
+    owners = _fault_owners()
+    if kind not in owners:
         raise ValueError(f"unknown fault {kind!r}; faults: {', '.join(FAULT_KINDS)}")
+    a = None if kind == "supply_sag" else spec.joint_names.index(joint)
+    owners[kind](lw, a, kind, mode)

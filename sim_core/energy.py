@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from .components.cylinder import cylinder_length
-from .effects.bulk_modulus import bulk_factor
+from .components.chambers import P_A, P_B
+from .components.hose import HOSE_BETA, HOSE_VOL
+from .components.joint import stop_energy
+from .components.pump import P_S, PUMP_QMAX, SUPPLY_C
+from .effects import EFFECTS
 from .kernel import layout as L
 
 
@@ -49,47 +50,26 @@ def ledger(ctx) -> EnergyLedger:
 
 
 def stored_energy(ctx) -> dict[str, float]:
-    """Energy stored in the state of ``ctx`` (J), by kind."""
+    """Energy stored in the state of ``ctx`` (J), by kind: the rigid bodies, end stops, the oil in
+    every chamber and hose (lumped), and what each effect stores in its own states."""
     rb = ctx.rigid_body()
     q, qd = ctx.XQ[0], ctx.XQ[1]
-    AP, DP, GP, XS = ctx.AP, ctx.DP, ctx.GP, ctx.XS
+    AP, GP, XS = ctx.AP, ctx.GP, ctx.XS
     out = {"kinetic": rb.kinetic_energy(q, qd), "gravity": rb.potential_energy(q), "oil": 0.0,
-           "hose_flow": 0.0, "springs": 0.0}
-    for i in range(q.size):
-        if q[i] > DP[i, L.DP_UPPER]:
-            out["springs"] += 0.5 * DP[i, L.DP_STOP_K] * (q[i] - DP[i, L.DP_UPPER]) ** 2
-        elif q[i] < DP[i, L.DP_LOWER]:
-            out["springs"] += 0.5 * DP[i, L.DP_STOP_K] * (q[i] - DP[i, L.DP_LOWER]) ** 2
-    beta = GP[L.GP_BETA]
-
-    def bf(p):
-        return bulk_factor(p, GP[L.GP_E_BULK], GP[L.GP_BULK_SCALE], GP[L.GP_BULK_PAIR], GP[L.GP_P_ATM])
-
+           "hose_flow": 0.0, "springs": stop_energy(ctx.DP, q)}
+    beta, bf = ctx.bulk_functions()
     for a in range(AP.shape[0]):
-        dof = int(AP[a, L.AP_DOF])
-        comp = AP[a, L.AP_E_COMPLIANCE] != 0.0
-        th = XS[a, L.XS_TH_A] if comp else q[dof]
-        if AP[a, L.AP_KIND] == 0.0:
-            Ln, _ = cylinder_length(th, AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2])
-            x = Ln - AP[a, L.AP_LK_LMIN]
-            va = AP[a, L.AP_VDEAD_A] + AP[a, L.AP_AREA_A] * x
-            vb = AP[a, L.AP_VDEAD_B] + AP[a, L.AP_AREA_B] * (AP[a, L.AP_STROKE] - x)
-        else:
-            va, vb = AP[a, L.AP_VDEAD_A], AP[a, L.AP_VDEAD_B]
-        pa, pb = XS[a, L.XS_P_A], XS[a, L.XS_P_B]
-        vh, bh = AP[a, L.AP_HOSE_VOL], AP[a, L.AP_HOSE_BETA]
-        if AP[a, L.AP_E_LINE] != 0.0:
-            ua, ub = XS[a, L.XS_PH_A], XS[a, L.XS_PH_B]
-            out["oil"] += 0.5 * (va / (beta * bf(pa)) * pa ** 2 + vb / (beta * bf(pb)) * pb ** 2)
-            out["oil"] += 0.5 * vh / bh * (ua ** 2 / bf(ua) + ub ** 2 / bf(ub))
-            out["hose_flow"] += 0.5 * AP[a, L.AP_HOSE_I] * (XS[a, L.XS_QH_A] ** 2 + XS[a, L.XS_QH_B] ** 2)
-        else:
+        oil_done = False
+        for eff in EFFECTS.values():
+            if ctx.effect_on(eff, a):
+                oil_done |= eff.stored_energy(ctx, a, out)
+        if not oil_done:   # chamber and hose as one node per side
+            va, vb = ctx.chamber_volumes(a)
+            pa, pb = XS[a, P_A], XS[a, P_B]
+            vh, bh = AP[a, HOSE_VOL], AP[a, HOSE_BETA]
             out["oil"] += 0.5 * ((va / beta + vh / bh) * pa ** 2 / bf(pa) + (vb / beta + vh / bh) * pb ** 2 / bf(pb))
-        if comp:
-            out["springs"] += 0.5 * AP[a, L.AP_COMP_K] * (XS[a, L.XS_TH_A] - q[dof]) ** 2
-            out["kinetic"] += 0.5 * AP[a, L.AP_COMP_JA] * XS[a, L.XS_OM_A] ** 2
-    if GP[L.GP_PUMP_QMAX] > 0.0:
-        out["oil"] += 0.5 * GP[L.GP_SUPPLY_C] * ctx.XG[L.XG_P_S] ** 2
+    if GP[PUMP_QMAX] > 0.0:
+        out["oil"] += 0.5 * GP[SUPPLY_C] * ctx.XG[P_S] ** 2
     out["total"] = float(sum(out.values()))
     return out
 
@@ -117,9 +97,8 @@ def balance(ctx, e0: dict, l0: EnergyLedger | None = None) -> dict[str, float]:
 
 
 def with_ledger(ctx) -> None:
-    """Switch the kernel's energy ledger on for ``ctx``."""
+    """Switch the kernel's energy ledger on for ``ctx`` (and start it from zero)."""
     ctx.energy_ledger = True
     ctx.GP[L.GP_ENERGY] = 1.0
-    np.copyto(ctx.XG[L.XG_E_SUPPLY:L.XG_E_RELIEF_PUMP + 1], 0.0)
-    ctx.XG[L.XG_E_ACT] = 0.0
-    ctx.XG[L.XG_E_COMPRESS] = 0.0
+    for c in L.XG.owned_by("energy"):
+        ctx.XG[c.index] = 0.0

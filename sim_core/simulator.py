@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernel import layout as L
-from .kernel.step import advance, sample_sensors
+from .kernel.compose import kernel
+from .kernel.workspace import make_workspace, tree_arrays
 
 
 class SimulationError(RuntimeError):
@@ -59,14 +60,8 @@ class Simulator:
         self.context = context
         ctx = context
         n, na = ctx.spec.tree.n, len(ctx.spec.joints)
-        self._ws = (
-            np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3, 3)),
-            np.zeros((3, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
-            np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, n)),
-            np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n),
-            np.zeros(n), np.zeros(n), np.zeros((na, 4)), np.zeros((5, 5)), np.zeros((5, 2)), np.zeros((4, 7, 7)),
-        )
-        self._backup = (np.zeros((2, n)), np.zeros((na, L.XS_N)), np.zeros(L.XG_N))
+        self._kernel = kernel()
+        self._ws = make_workspace(n, na)
         # one-step buffers for the real-time loop (no allocation per tick)
         self._dt1 = np.zeros(1)
         self._u1 = np.zeros((1, na))
@@ -76,14 +71,12 @@ class Simulator:
         self._ya1 = np.zeros((1, na, L.YA_N))
 
     def _tree(self):
-        t = self.context.spec.tree
-        lw = self.context.lowered
-        return (t.parent, t.R_tree, t.p_tree, t.axis, lw.mass, lw.com, lw.inertia, t.gravity)
+        return tree_arrays(self.context.spec.tree, self.context.lowered)
 
     def _call(self, dts, U, Yt, Yq, Yqd, Ya) -> int:
         c = self.context
-        k = advance(dts, U, self._tree(), c.DP, c.AP, c.GP, c.XQ, c.XS, c.XG, c.HT, c.HU, c.rng,
-                    self._ws, self._backup, Yt, Yq, Yqd, Ya)
+        k = self._kernel.advance(dts, U, self._tree(), c.DP, c.AP, c.GP, c.XQ, c.XS, c.XG, c.HT, c.HU, c.rng,
+                                 self._ws, Yt, Yq, Yqd, Ya)
         err = int(c.XG[L.XG_ERROR])
         if err:
             c.XG[L.XG_ERROR] = 0.0
@@ -105,7 +98,7 @@ class Simulator:
         c = self.context
         na = len(c.spec.joints)
         row = np.zeros((na, L.YA_N))
-        sample_sensors(c.AP, c.XQ[0], c.XS, c.rng, row, np.zeros(na) if u is None else np.asarray(u, float))
+        self._kernel.sample_sensors(c.AP, c.XQ[0], c.XS, c.rng, row, np.zeros(na) if u is None else np.asarray(u, float))
         return row
 
     def run(self, times, U) -> Trajectory:

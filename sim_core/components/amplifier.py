@@ -2,8 +2,15 @@
 
 from numba import njit
 
+from ..kernel.layout import AP, col
 from .base import Component, Parameter
 from .labview_adaptation import CITATION_MARS_ND
+
+AMP_GAIN, AMP_IMAX = AP.declare(
+    "amplifier",
+    col("AMP_GAIN", "A/V", "amplifier transconductance"),
+    col("AMP_IMAX", "A", "amplifier current limit"),
+)
 
 
 class Amplifier(Component):
@@ -23,8 +30,12 @@ class Amplifier(Component):
         Parameter("max_current", "A", "current limit of the output stage", None, 0.0, 10.0),
     )
 
+    def lower(self, lw, a, spec, js):
+        lw.AP[a, AMP_GAIN] = self["gain"]
+        lw.AP[a, AMP_IMAX] = self["max_current"]
 
-@njit(cache=True, inline="always")
+
+@njit(inline="always")
 def amplifier_current(v, gain, imax):
     """Reference current (A) for a unipolar input ``v`` (V)."""
     i = gain * v

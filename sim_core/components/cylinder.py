@@ -5,7 +5,23 @@ import math
 import numpy as np
 from numba import njit
 
+from ..kernel.layout import AP, XS, col
 from .base import Component, Parameter, ParameterError
+from .chambers import AREA_A, AREA_B, P_A, P_B, VDEAD_A, VDEAD_B, VISC, lower_relief
+
+LK_C0, LK_D1, LK_D2, LK_LMIN, STROKE = AP.declare(
+    "cylinder",
+    col("LK_C0", "m^2", "linkage: L^2 = C0 - 2 (D1 cos q + D2 sin q)"),
+    col("LK_D1", "m^2", "linkage D1"),
+    col("LK_D2", "m^2", "linkage D2"),
+    col("LK_LMIN", "m", "pin-to-pin length at full retraction"),
+    col("STROKE", "m", "cylinder stroke"),
+)
+CYL_L, CYL_ARM = XS.declare(
+    "cylinder",
+    col("CYL_L", "m", "pin-to-pin length L at the actuator's current angle (computed once per substep)"),
+    col("CYL_ARM", "m/rad", "moment arm dL/dq there"),
+)
 
 CITATION_CYLINDER = (
     "H. E. Merritt, Hydraulic Control Systems, Wiley, 1967, ch. 5; E. Papadopoulos et al., "
@@ -86,8 +102,52 @@ class Cylinder(Component):
         L = np.sqrt(L2)
         return c0, d1, d2, float(L[0]), float(L[-1] - L[0])
 
+    KIND = "cylinder"
+    KERNEL = {"prime": "cylinder_prime", "force": "cylinder_force", "geometry": "cylinder_geometry"}
 
-@njit(cache=True, inline="always")
+    def lower(self, lw, a, spec, js):
+        tree = spec.tree
+        i = tree.index(js.dof)
+        AP_ = lw.AP
+        AP_[a, AREA_A] = self.area_a
+        AP_[a, AREA_B] = self.area_b
+        c0, d1, d2, lmin, stroke = self.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+        AP_[a, LK_C0], AP_[a, LK_D1], AP_[a, LK_D2] = c0, d1, d2
+        AP_[a, LK_LMIN], AP_[a, STROKE] = lmin, stroke
+        AP_[a, VDEAD_A] = self["dead_volume_a"]
+        AP_[a, VDEAD_B] = self["dead_volume_b"]
+        AP_[a, VISC] = self["viscous_friction"]
+        lower_relief(lw, a, self["port_relief_pressure"], js.components["valve"]["rated_flow"])
+
+    @staticmethod
+    def holding_pressures(AP_row, th, tau, pm):
+        """Chamber pressures (Pa) around the mean ``pm`` that hold joint torque ``tau`` at ``th``,
+        spread over both chambers in proportion to their areas (least-norm deviation from ``pm``)."""
+        _, arm = cylinder_length(th, AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2])
+        A_a, A_b = AP_row[AREA_A], AP_row[AREA_B]
+        lam = (tau / arm - pm * (A_a - A_b)) / (A_a ** 2 + A_b ** 2)
+        return pm + lam * A_a, pm - lam * A_b
+
+    @staticmethod
+    def max_force(AP_row, lower, upper, p_supply):
+        """Largest joint torque at full supply pressure over the joint range (N m)."""
+        return p_supply * AP_row[AREA_A] * float(Cylinder.moment_arms(AP_row, np.linspace(lower, upper, 50)).max())
+
+    @staticmethod
+    def moment_arms(AP_row, qs):
+        """dL/dq (m/rad) at joint angles ``qs`` from a lowered actuator row."""
+        c0, d1, d2 = AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2]
+        return (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(c0 - 2 * (d1 * np.cos(qs) + d2 * np.sin(qs)))
+
+    @staticmethod
+    def chamber_volumes(AP_row, th):
+        """(V_A, V_B) in m^3 at actuator angle ``th`` (stored-energy bookkeeping)."""
+        L, _ = cylinder_length(th, AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2])
+        x = L - AP_row[LK_LMIN]
+        return AP_row[VDEAD_A] + AP_row[AREA_A] * x, AP_row[VDEAD_B] + AP_row[AREA_B] * (AP_row[STROKE] - x)
+
+
+@njit(inline="always")
 def cylinder_length(q, c0, d1, d2):
     """Pin-to-pin length L (m) and moment arm dL/dq (m/rad) at joint angle ``q``."""
     c = math.cos(q)
@@ -97,3 +157,36 @@ def cylinder_length(q, c0, d1, d2):
         L2 = 1e-12
     L = math.sqrt(L2)
     return L, (d1 * s - d2 * c) / L
+
+
+@njit(inline="always")
+def cylinder_prime(a, th, AP, XS):
+    """Cache L and dL/dq at the actuator angle ``th``."""
+    L, arm = cylinder_length(th, AP[a, LK_C0], AP[a, LK_D1], AP[a, LK_D2])
+    XS[a, CYL_L] = L
+    XS[a, CYL_ARM] = arm
+
+
+@njit(inline="always")
+def cylinder_force(a, AP, XS):
+    """Joint torque of the chamber pressures (N m) and the seal friction referred to the joint
+    (N m s/rad), at the cached angle."""
+    arm = XS[a, CYL_ARM]
+    tau_h = (XS[a, P_A] * AP[a, AREA_A] - XS[a, P_B] * AP[a, AREA_B]) * arm
+    return tau_h, AP[a, VISC] * arm * arm
+
+
+@njit(inline="always")
+def cylinder_geometry(a, th, om, AP, XS):
+    """Chamber volumes (m^3), displaced flows (m^3/s) and volume rates (m^3/s) at angle ``th`` and rate
+    ``om``; caches L and the arm for the next substep's force."""
+    L, arm = cylinder_length(th, AP[a, LK_C0], AP[a, LK_D1], AP[a, LK_D2])
+    XS[a, CYL_L] = L
+    XS[a, CYL_ARM] = arm
+    x = L - AP[a, LK_LMIN]
+    xd = arm * om
+    va = AP[a, VDEAD_A] + AP[a, AREA_A] * x
+    vb = AP[a, VDEAD_B] + AP[a, AREA_B] * (AP[a, STROKE] - x)
+    qdisp_a = AP[a, AREA_A] * xd
+    qdisp_b = -AP[a, AREA_B] * xd
+    return va, vb, qdisp_a, qdisp_b, qdisp_a, qdisp_b    # volumes change with the displaced flows

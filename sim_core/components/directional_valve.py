@@ -4,7 +4,19 @@ import math
 
 from numba import njit
 
+from ..kernel.layout import AP, col
 from .base import Component, Parameter, ParameterError
+
+KV, OVERLAP, NULL_LEAK, POLY1, POLY2, POLY3, DP_TR = AP.declare(
+    "valve",
+    col("KV", "m^3/s/sqrt(Pa)", "valve flow coefficient per metering edge at full opening"),
+    col("OVERLAP", "-", "spool overlap (stroke fraction)"),
+    col("NULL_LEAK", "-", "null leakage opening of every edge (fraction of full opening)"),
+    col("POLY1", "-", "opening characteristic a(s) = c1 s + c2 s^2 + c3 s^3"),
+    col("POLY2", "-", "opening characteristic, c2"),
+    col("POLY3", "-", "opening characteristic, c3"),
+    col("DP_TR", "Pa", "laminar/turbulent transition pressure of the orifices"),
+)
 
 CITATION_VALVE = (
     "H. E. Merritt, Hydraulic Control Systems, Wiley, 1967, ch. 3; E. Papadopoulos, B. Mu, R. Frenette, "
@@ -63,8 +75,16 @@ class DirectionalValve(Component):
         """K_v per edge at full opening (m^3/s/sqrt(Pa))."""
         return self.values["rated_flow"] / math.sqrt(self.values["rated_pressure_drop"])
 
+    def lower(self, lw, a, spec, js):
+        AP_ = lw.AP
+        AP_[a, KV] = self.flow_coefficient
+        AP_[a, OVERLAP] = self["overlap"]
+        AP_[a, NULL_LEAK] = self["null_leakage"]
+        AP_[a, POLY1], AP_[a, POLY2], AP_[a, POLY3] = self["characteristic"]
+        AP_[a, DP_TR] = self["transition_pressure"]
 
-@njit(cache=True, inline="always")
+
+@njit(inline="always")
 def orifice(dp, tr):
     """Regularised orifice function f(dp) (sqrt(Pa)) with its slope df/d(dp)."""
     s = dp * dp + tr * tr
@@ -74,7 +94,7 @@ def orifice(dp, tr):
     return f, slope
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def opening(s, overlap, c1, c2, c3):
     """Relative orifice area of the edges opened by a positive spool travel ``s`` (s >= 0)."""
     if s <= overlap:
@@ -83,3 +103,40 @@ def opening(s, overlap, c1, c2, c3):
     if x > 1.0:  # past full opening (stroke_limit > 1): continue with the end slope
         return 1.0 + (x - 1.0) * (c1 + 2.0 * c2 + 3.0 * c3)
     return x * (c1 + x * (c2 + x * c3))
+
+
+@njit(inline="always")
+def edge_conductances(a, s, kvn, AP):
+    """(g_PA = g_BT, g_PB = g_AT): conductances of the edges a spool travel ``s`` opens; ``kvn`` is
+    the flow coefficient of the negative-travel edges (K_v unless an effect makes them differ)."""
+    sp = s if s > 0.0 else 0.0
+    sn = -s if s < 0.0 else 0.0
+    ov = AP[a, OVERLAP]
+    c1 = AP[a, POLY1]
+    c2 = AP[a, POLY2]
+    c3 = AP[a, POLY3]
+    leak0 = AP[a, NULL_LEAK]
+    g_pa = AP[a, KV] * (opening(sp, ov, c1, c2, c3) + leak0)    # P->A and B->T
+    g_pb = kvn * (opening(sn, ov, c1, c2, c3) + leak0)          # P->B and A->T
+    return g_pa, g_pb
+
+
+@njit(inline="always")
+def edge_flows(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
+    """Flows of the four metering edges for port pressures ``ua``, ``ub`` and their slopes with
+    respect to the port pressure (P->A, A->T, P->B, B->T)."""
+    tr = AP[a, DP_TR]
+    f_pa, d_pa = orifice(p_s - ua, tr)
+    f_at, d_at = orifice(ua - p_t, tr)
+    f_pb, d_pb = orifice(p_s - ub, tr)
+    f_bt, d_bt = orifice(ub - p_t, tr)
+    return (g_pa * f_pa, g_pb * f_at, g_pb * f_pb, g_pa * f_bt,
+            -g_pa * d_pa, g_pb * d_at, -g_pb * d_pb, g_pa * d_bt)
+
+
+@njit(inline="always")
+def valve_flows_only(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
+    """The four edge flows without slopes (reference solver)."""
+    tr = AP[a, DP_TR]
+    return (g_pa * orifice(p_s - ua, tr)[0], g_pb * orifice(ua - p_t, tr)[0],
+            g_pb * orifice(p_s - ub, tr)[0], g_pa * orifice(ub - p_t, tr)[0])

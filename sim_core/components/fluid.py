@@ -1,6 +1,16 @@
 """Hydraulic fluid properties."""
 
+from ..kernel.layout import GP, col
 from .base import Component, Parameter
+
+P_ATM = 101325.0  # Pa
+
+BETA, P_MIN, ATM = GP.declare(
+    "fluid",
+    col("BETA", "Pa", "oil bulk modulus"),
+    col("P_MIN", "Pa", "cavitation floor (gauge)"),
+    col("P_ATM", "Pa", "atmospheric pressure"),
+)
 
 
 class Fluid(Component):
@@ -27,3 +37,8 @@ class Fluid(Component):
     @property
     def dynamic_viscosity(self) -> float:
         return self.values["density"] * self.values["kinematic_viscosity"]
+
+    def lower_global(self, lw, spec):
+        lw.GP[BETA] = self["bulk_modulus"]
+        lw.GP[P_MIN] = self["cavitation_pressure"]
+        lw.GP[ATM] = P_ATM

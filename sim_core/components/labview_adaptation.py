@@ -2,6 +2,7 @@
 
 from numba import njit
 
+from ..kernel.layout import AP_U_MAX, AP_U_MIN
 from .base import Component, Parameter
 
 CITATION_MARS_ND = (
@@ -39,8 +40,11 @@ class LabviewAdaptation(Component):
 
             raise ParameterError(f"{self.where}.command_range: must contain 0 V, got {[lo, hi]}")
 
+    def lower(self, lw, a, spec, js):
+        lw.AP[a, AP_U_MIN], lw.AP[a, AP_U_MAX] = self["command_range"]
 
-@njit(cache=True, inline="always")
+
+@njit(inline="always")
 def adapt(u):
     """Signed command (V) -> (v_A, v_B) unipolar amplifier inputs (V)."""
     if u >= 0.0:

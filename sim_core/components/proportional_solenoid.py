@@ -1,7 +1,10 @@
 """Proportional solenoid: coil current dynamics."""
 
+from ..kernel.layout import AP, col
 from .base import Component, Parameter
 from .labview_adaptation import CITATION_MARS_ND
+
+SOL_TAU = AP.declare("solenoid", col("SOL_TAU", "s", "solenoid current time constant"))
 
 
 class ProportionalSolenoid(Component):
@@ -20,3 +23,6 @@ class ProportionalSolenoid(Component):
     PARAMETERS = (
         Parameter("time_constant", "s", "current rise time constant of the coil with its amplifier", None, 1e-4, 0.2),
     )
+
+    def lower(self, lw, a, spec, js):
+        lw.AP[a, SOL_TAU] = self["time_constant"]

@@ -1,9 +1,39 @@
 """Directional-valve spool dynamics and the exact discretisation of the command chain."""
 
+import math
+
 import numpy as np
 from numba import njit
 
+from ..kernel.layout import AP, XS, col
 from .base import Component, Parameter
+from .proportional_solenoid import SOL_TAU
+
+# the linear command chain z = [i_A, i_B, x, x', x_lag]: five contiguous state columns
+I_A, I_B, SPOOL_X, SPOOL_V, LAG_X = XS.declare(
+    "spool",
+    col("I_A", "A", "solenoid A current", ode=True, atol=1e-10),
+    col("I_B", "A", "solenoid B current", ode=True, atol=1e-10),
+    col("SPOOL_X", "-", "spool position (stroke fraction)", ode=True, atol=1e-10),
+    col("SPOOL_V", "1/s", "spool velocity", ode=True, atol=1e-8),
+    col("LAG_X", "-", "spool_lag filtered position (follows the spool when the effect is off)", ode=True, atol=1e-10),
+)
+SPOOL_GAIN, SPOOL_WN, SPOOL_ZETA, SPOOL_LIMIT, LAG_TAU, CMD_H, PHI, GAM = AP.declare(
+    "spool",
+    col("SPOOL_GAIN", "1/A", "spool position per net solenoid current"),
+    col("SPOOL_WN", "rad/s", "spool natural frequency"),
+    col("SPOOL_ZETA", "-", "spool damping ratio"),
+    col("SPOOL_LIMIT", "-", "spool end stop (stroke fraction)"),
+    col("LAG_TAU", "s", "time constant of the lag state (the spool_lag effect's; 10 ms when off)"),
+    col("CMD_H", "s", "substep the matrices below were computed for (-1: none)"),
+    col("PHI", "-", "exact discretisation of the command chain, e^{A h} (5 x 5, row major)", 25),
+    col("GAM", "-", "its input matrix, int_0^h e^{A s} ds B (5 x 2)", 10),
+)
+F_SPOOL_STUCK, F_SPOOL_POS = AP.declare(
+    "spool",
+    col("F_SPOOL_STUCK", "-", "fault: spool frozen (1.0)"),
+    col("F_SPOOL_POS", "-", "fault: where it froze (stroke fraction)"),
+)
 
 
 class Spool(Component):
@@ -27,9 +57,24 @@ class Spool(Component):
         Parameter("gain", "1/A", "spool position (fraction of stroke) per ampere of net solenoid current", None, 0.0, 100.0),
         Parameter("stroke_limit", "-", "spool end stop, fraction of the metering stroke", 1.0, 0.1, 2.0),
     )
+    FAULTS = ("spool_stuck",)
+
+    def lower(self, lw, a, spec, js):
+        AP_ = lw.AP
+        AP_[a, SPOOL_GAIN] = self["gain"]
+        AP_[a, SPOOL_WN] = 2.0 * math.pi * self["natural_frequency"]
+        AP_[a, SPOOL_ZETA] = self["damping_ratio"]
+        AP_[a, SPOOL_LIMIT] = self["stroke_limit"]
+        AP_[a, LAG_TAU] = 0.01
+        AP_[a, CMD_H] = -1.0
+
+    @staticmethod
+    def lower_fault(lw, a, kind, mode):
+        lw.AP[a, F_SPOOL_STUCK] = 1.0
+        lw.AP[a, F_SPOOL_POS] = float(mode.get("position", 0.0))
 
 
-@njit(cache=True)
+@njit
 def command_chain_matrix(tau_s, wn, zeta, gain, tau_lag, A, B):
     """Continuous-time matrices of z = [i_A, i_B, x, x', x_lag], w = [i_ref_A, i_ref_B]."""
     for r in range(5):
@@ -50,7 +95,7 @@ def command_chain_matrix(tau_s, wn, zeta, gain, tau_lag, A, B):
     A[4, 4] = -1.0 / tau_lag
 
 
-@njit(cache=True)
+@njit
 def expm_augmented(A, B, h, work, out_phi, out_gam):
     """Exact zero-order-hold discretisation: Phi = e^{Ah}, Gam = int_0^h e^{As} ds B.
 
@@ -114,6 +159,78 @@ def expm_augmented(A, B, h, work, out_phi, out_gam):
             out_phi[r * 5 + c] = S[r, c]
         out_gam[r * 2] = S[r, 5]
         out_gam[r * 2 + 1] = S[r, 6]
+
+
+@njit
+def refresh_command_chain(AP, h, Acc, Bcc, expw):
+    """Recompute the exact discretisation of every actuator's command chain for substep ``h``."""
+    for a in range(AP.shape[0]):
+        if abs(AP[a, CMD_H] - h) <= 1e-9 * h:  # grids from arange differ in the last bits
+            continue
+        command_chain_matrix(AP[a, SOL_TAU], AP[a, SPOOL_WN], AP[a, SPOOL_ZETA],
+                             AP[a, SPOOL_GAIN], AP[a, LAG_TAU], Acc, Bcc)
+        expm_augmented(Acc, Bcc, h, expw, AP[a, PHI:PHI + 25], AP[a, GAM:GAM + 10])
+        AP[a, CMD_H] = h
+
+
+@njit(inline="always")
+def advance_chain(a, ira, irb, AP, XS):
+    """z <- Phi z + Gam [i_ref_A, i_ref_B]: the chain over one substep, exact for constant currents."""
+    z0 = XS[a, I_A]
+    z1 = XS[a, I_B]
+    z2 = XS[a, SPOOL_X]
+    z3 = XS[a, SPOOL_V]
+    z4 = XS[a, LAG_X]
+    for r in range(5):
+        b = PHI + 5 * r
+        XS[a, I_A + r] = (AP[a, b] * z0 + AP[a, b + 1] * z1 + AP[a, b + 2] * z2 + AP[a, b + 3] * z3
+                          + AP[a, b + 4] * z4 + AP[a, GAM + 2 * r] * ira + AP[a, GAM + 2 * r + 1] * irb)
+
+
+@njit(inline="always")
+def stuck_spool(a, x_old, AP, XS):
+    """Fault 'spool_stuck': the chain's spool states frozen at the fault position; the metering
+    position of the substep's start then is that position too."""
+    if AP[a, F_SPOOL_STUCK] != 0.0:
+        XS[a, SPOOL_X] = AP[a, F_SPOOL_POS]
+        XS[a, SPOOL_V] = 0.0
+        XS[a, LAG_X] = AP[a, F_SPOOL_POS]
+        return AP[a, F_SPOOL_POS]
+    return x_old
+
+
+@njit(inline="always")
+def metering_position(a, x_old, x_new, AP):
+    """Metering position over the substep: the mean of its ends, within the spool's end stops."""
+    s = 0.5 * (x_old + x_new)
+    lim = AP[a, SPOOL_LIMIT]
+    if s > lim:
+        s = lim
+    elif s < -lim:
+        s = -lim
+    return s
+
+
+@njit(inline="always")
+def spool_position(a, AP, XS):
+    """The position the valve meters with when no effect changes it."""
+    return XS[a, SPOOL_X]
+
+
+@njit(inline="always")
+def chain_derivative(a, ira, irb, AP, XS, dXS):
+    """Continuous-time chain for the reference solver (the same matrices, not discretised)."""
+    ts = AP[a, SOL_TAU]
+    wn = AP[a, SPOOL_WN]
+    dXS[a, I_A] = (ira - XS[a, I_A]) / ts
+    dXS[a, I_B] = (irb - XS[a, I_B]) / ts
+    dXS[a, SPOOL_X] = XS[a, SPOOL_V]
+    dXS[a, SPOOL_V] = wn * wn * (AP[a, SPOOL_GAIN] * (XS[a, I_A] - XS[a, I_B]) - XS[a, SPOOL_X]) - 2.0 * AP[a, SPOOL_ZETA] * wn * XS[a, SPOOL_V]
+    dXS[a, LAG_X] = (XS[a, SPOOL_X] - XS[a, LAG_X]) / AP[a, LAG_TAU]
+    if AP[a, F_SPOOL_STUCK] != 0.0:
+        dXS[a, SPOOL_X] = 0.0
+        dXS[a, SPOOL_V] = 0.0
+        dXS[a, LAG_X] = 0.0
 
 
 def discretise(tau_s: float, wn: float, zeta: float, gain: float, tau_lag: float, h: float):

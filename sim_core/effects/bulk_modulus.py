@@ -1,8 +1,15 @@
 from numba import njit
 
 from ..components.base import Parameter
-from ..kernel import layout as L
-from .base import CITE_CATALOG, Effect
+from ..components.fluid import ATM
+from ..kernel.layout import GP, col
+from .base import Effect
+
+BULK_SCALE, BULK_PAIR = GP.declare(
+    "bulk_modulus",
+    col("BULK_SCALE", "-", "multiplier on the bulk modulus at high pressure"),
+    col("BULK_PAIR", "Pa", "entrained-air pressure scale"),
+)
 
 
 class BulkModulus(Effect):
@@ -15,25 +22,35 @@ class BulkModulus(Effect):
 
     name = "bulk_modulus"
     scope = "global"
-    citation = "H. E. Merritt, Hydraulic Control Systems, 1967, §2.5; " + CITE_CATALOG + " (§3.12)"
+    citation = "H. E. Merritt, Hydraulic Control Systems, 1967, §2.5; HydroHIL research note 'discrepancy catalog' (§3.12)"
     PARAMETERS = (
         Parameter("scale", "-", "multiplier on the bulk modulus at high pressure", 0.5, 0.05, 2.0),
         Parameter("air_pressure", "Pa", "pressure scale of the entrained-air softening", 5e5, 0.0, 5e6),
     )
+    HOOKS = {"bulk": "air_softened"}
+
+    @classmethod
+    def lower_neutral(cls, lw, a):
+        lw.GP[BULK_SCALE] = 1.0
 
     @classmethod
     def lower(cls, params, lw, a):
-        lw.GP[L.GP_E_BULK] = 1.0
-        lw.GP[L.GP_BULK_SCALE] = params["scale"]
-        lw.GP[L.GP_BULK_PAIR] = params["air_pressure"]
+        super().lower(params, lw, a)
+        lw.GP[BULK_SCALE] = params["scale"]
+        lw.GP[BULK_PAIR] = params["air_pressure"]
+
+    @classmethod
+    def candidate(cls, spec, joint, scales, guess, current):
+        s0 = current["scale"] if current else 1.0
+        a0 = current["air_pressure"] if current else 5e5
+        return {"free": [("scale", 0.05, 2.0, True, s0, ""), ("air_pressure", 1e3, 5e6, True, a0 if current else 0.0, "Pa")],
+                "grid": [[s * s0, a0] for s in (0.15, 0.3, 0.5, 0.75)] + [[s0, a] for a in (5e4, 2e6)]}
 
 
-@njit(cache=True, inline="always")
-def bulk_factor(p, on, scale, p_air, p_atm):
+@njit(inline="always")
+def air_softened(p, GP):
     """Multiplier on the nominal bulk modulus at gauge pressure ``p``."""
-    if on == 0.0:
-        return 1.0
-    pa = p + p_atm
+    pa = p + GP[ATM]
     if pa < 1e3:
         pa = 1e3
-    return scale / (1.0 + p_air / pa)
+    return GP[BULK_SCALE] / (1.0 + GP[BULK_PAIR] / pa)

@@ -1,8 +1,14 @@
 from numba import njit
 
 from ..components.base import Parameter
-from ..kernel import layout as L
+from ..kernel.layout import AP, col
 from .base import CITE_CATALOG, Effect
+
+LEAK_INT, LEAK_EXT = AP.declare(
+    "leakage",
+    col("LEAK_INT", "m^3/(s Pa)", "cross-port leakage coefficient"),
+    col("LEAK_EXT", "m^3/(s Pa)", "external leakage coefficient of each chamber to tank"),
+)
 
 
 class Leakage(Effect):
@@ -20,28 +26,32 @@ class Leakage(Effect):
         Parameter("internal", "m^3/(s Pa)", "cross-port leakage coefficient", 2e-12, 0.0, 3e-10),
         Parameter("external", "m^3/(s Pa)", "leakage coefficient of each chamber to tank", 0.0, 0.0, 1e-10),
     )
+    HOOKS = {"leakage": "chamber_leakage"}
+    CONFUSIONS = {"area_ratio": "holds at several loads, or chamber pressures"}
 
     @classmethod
     def lower(cls, params, lw, a):
-        lw.AP[a, L.AP_E_LEAK] = 1.0
-        lw.AP[a, L.AP_LEAK_INT] = params["internal"]
-        lw.AP[a, L.AP_LEAK_EXT] = params["external"]
+        super().lower(params, lw, a)
+        lw.AP[a, LEAK_INT] = params["internal"]
+        lw.AP[a, LEAK_EXT] = params["external"]
+
+    @classmethod
+    def candidate(cls, spec, joint, scales, guess, current):
+        ci = current["internal"] if current else 0.0
+        ce = current["external"] if current else 0.0
+        lo_i, lo_e = 1e-15, 1e-16
+        if current:
+            grid = [[max(ci, lo_i) * f, max(ce, lo_e) * f2] for f, f2 in ((0.3, 1.0), (3.0, 1.0), (1.0, 0.3), (1.0, 3.0), (3.0, 3.0))]
+        else:
+            grid = [[c, lo_e * 10] for c in (1e-13, 1e-12, 1e-11, 5e-11)] + [[lo_i * 10, c] for c in (1e-13, 1e-12, 1e-11)]
+        return {"free": [("internal", lo_i, 3e-10, True, ci, "m^3/(s Pa)"), ("external", lo_e, 1e-10, True, ce, "m^3/(s Pa)")],
+                "fixed": {"internal": max(ci, lo_i), "external": max(ce, lo_e)}, "grid": grid}
 
 
-@njit(cache=True, inline="always")
-def chamber_leakage(pa, pb, p_t, c_int, c_ext, c_fault_a, c_fault_b, p_relief, k_relief):
-    """Flows leaving chambers A and B (m^3/s) and their slopes d/dp_own: cross-port leakage A->B,
-    external leakage and fault leaks to tank, and port reliefs above ``p_relief`` (0 = none)."""
+@njit(inline="always")
+def chamber_leakage(pa, pb, p_t, a, AP):
+    """Flows leaving chambers A and B by leakage (m^3/s) and their slopes d/dp_own."""
+    c_int = AP[a, LEAK_INT]
+    c_ext = AP[a, LEAK_EXT]
     q_int = c_int * (pa - pb)
-    lk_a = q_int + (c_ext + c_fault_a) * (pa - p_t)
-    lk_b = -q_int + (c_ext + c_fault_b) * (pb - p_t)
-    dlk_a = c_int + c_ext + c_fault_a
-    dlk_b = c_int + c_ext + c_fault_b
-    if p_relief > 0.0:
-        if pa > p_relief:
-            lk_a += k_relief * (pa - p_relief)
-            dlk_a += k_relief
-        if pb > p_relief:
-            lk_b += k_relief * (pb - p_relief)
-            dlk_b += k_relief
-    return lk_a, lk_b, dlk_a, dlk_b
+    return q_int + c_ext * (pa - p_t), -q_int + c_ext * (pb - p_t), c_int + c_ext, c_int + c_ext

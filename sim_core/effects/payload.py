@@ -1,7 +1,7 @@
 import numpy as np
 
 from ..components.base import Parameter, ParameterError
-from .base import CITE_CATALOG, Effect
+from .base import CITE_CATALOG, Effect, clip_grid
 
 
 class Payload(Effect):
@@ -16,6 +16,8 @@ class Payload(Effect):
     name = "payload"
     citation = CITE_CATALOG + " (§3.15)"
     PARAMETERS = (Parameter("mass", "kg", "point mass added at the payload point", 5.0, -1000.0, 5000.0),)
+    switch = False          # changes the link's mass at lowering; no equations of its own
+    MECHANISM = True        # lowered before the inertia-dependent parts (end stops, compliance)
 
     @classmethod
     def lower(cls, params, lw, a):
@@ -36,3 +38,16 @@ class Payload(Effect):
         lw.mass[body] = m1
         lw.com[body] = c1
         lw.inertia[body] = I
+
+    @classmethod
+    def candidate(cls, spec, joint, scales, guess, current):
+        from ..model.queries import subtree_mass
+
+        dof = spec.joint(joint).dof
+        m = subtree_mass(spec.tree, dof)
+        body = spec.tree.index(dof)
+        lo, hi = -0.8 * float(spec.tree.mass[body]), 4.0 * m
+        grid = [m * f for f in (-0.3, -0.1, 0.05, 0.15, 0.4, 1.0)]
+        null = current["mass"] if current else 0.0
+        return {"free": [("mass", lo, hi, False, null, "kg")], "fixed": {"mass": 0.0},
+                "grid": [[v] for v in clip_grid(grid, lo, hi)]}

@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from ..effects import EFFECTS
 from .metrics import velocity
 from .residual_tests import ljung_box, residual_peak, transfer_estimate
 
@@ -79,8 +80,7 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
     wm_all = velocity(y, dt)
     ws_all = velocity(yhat, dt)
     rw = wm_all - ws_all
-    out: dict = {"guesses": {}}
-    g = out["guesses"]
+    out: dict = {}
 
     rows = velocity_ratio_map(t, y, yhat, u, sigma, rate)
     moving = [rw_ for rw_ in rows if rw_["u"] != 0.0 and abs(rw_["w_sim"]) > max(3 * rw_["se"], 1e-3)]
@@ -94,8 +94,6 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
         u0 = -beta[1]
         out["deadband_u0"] = float(u0)
         out["deadband_t"] = float(u0 / se[1]) if se[1] > 0 else 0.0
-        if u0 > 0:
-            g["deadband"] = {"width": float(model_deadband + u0)}
     # all segments the model says should move: does the joint stand still?
     stalled = [m for m in rows if m["u"] != 0.0 and abs(m["w_sim"]) > max(3 * m["se"], 1e-3)
                and abs(m["w_meas"]) < 3 * m["se"]]
@@ -103,10 +101,7 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
     pos = [m["rho"] for m in moving if m["u"] > 0]
     neg = [m["rho"] for m in moving if m["u"] < 0]
     if pos and neg and np.median(pos) > 0:
-        ratio = float(np.median(neg) / np.median(pos))
-        out["asymmetry_ratio"] = ratio
-        if ratio > 0:
-            g["valve_asymmetry"] = {"ratio": ratio}
+        out["asymmetry_ratio"] = float(np.median(neg) / np.median(pos))
     big = [m for m in moving if abs(m["u"]) >= 0.4 * max(abs(m2["u"]) for m2 in moving)] if moving else []
     if len(big) >= 3 and len({abs(m["u"]) for m in big}) >= 2:
         xs = np.array([abs(m["u"]) for m in big])
@@ -153,8 +148,6 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
             if den < 0:
                 lag += 0.5 * (c[k - 1] - c[k + 1]) / den
         out["delay_lag_s"] = lag / rate
-        if lag > 0:
-            g["delay"] = {"delay": lag / rate}
     if np.ptp(ws_all) > 0:
         H = transfer_estimate(ws_all, wm_all, rate)
         out["etfe_phase_slope_s"] = H["phase_slope_s"]
@@ -165,8 +158,6 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
     pk_db, pk_f = residual_peak(rw, rate)
     out["residual_peak_db"] = pk_db
     out["residual_peak_hz"] = pk_f
-    if pk_f:
-        g["joint_compliance"] = {"frequency": pk_f}
 
     # backlash: the residual against the play state of the simulated motion (with nuisance terms)
     thr = max(5 * sigma * rate / 10.0, 0.02 * float(np.max(np.abs(ws_all)) or 1.0))
@@ -191,23 +182,25 @@ def joint_signatures(t, y, yhat, u, sigma: float, rate: float, *, model_deadband
         dof = max(len(r) - X.shape[1], 1)
         out["backlash_F"] = float((rss0 - rss1) / max(rss1 / dof, 1e-30))
         out["backlash_half_width"] = float(-beta[0])
-        if beta[0] < 0:
-            g["backlash"] = {"width": float(-2 * beta[0])}
     # sensor: nothing dynamic is linear in the angle
     if np.ptp(yhat) > 0:
         X = np.column_stack([np.ones_like(yhat), yhat])
         beta, se, res = _ols(X, r)
         out["sensor_R2"] = float(1.0 - float(res @ res) / max(float(r @ r), 1e-30))
         out["sensor_offset"] = float(np.mean(r))
-        g["sensor_offset"] = {"offset": float(np.mean(r))}
         gslope = float((yhat @ r) / (yhat @ yhat)) if float(yhat @ yhat) > 0 else 0.0
         out["sensor_gain"] = 1.0 + gslope
-        g["sensor_gain"] = {"gain": 1.0 + gslope}
     # global flag: Ljung-Box on the decimated velocity residual
     dec = max(1, int(round(0.075 * rate)))
     q, p = ljung_box(rw[::dec], lags=20)
     out["ljung_box_Q"] = q
     out["ljung_box_p"] = p
+    # each effect reads its starting values off these statistics (its own ``signature_guess``)
+    out["guesses"] = {}
+    for eff in EFFECTS.values():
+        guess = eff.signature_guess(out, {"model_deadband": model_deadband})
+        if guess:
+            out["guesses"][eff.name] = guess
     return out
 
 

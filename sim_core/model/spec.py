@@ -36,7 +36,7 @@ class SpecError(ParameterError):
 
 
 class Integrator(Component):
-    """Fixed-step integrator settings of the kernel (see ``sim_core.kernel.step``)."""
+    """Fixed-step integrator settings of the kernel (see ``sim_core.kernel.skeleton``)."""
 
     section = "integrator"
     citation = "HydroHIL research note 'performance-measurements' (SIP scheme, step-size study)"

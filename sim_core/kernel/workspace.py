@@ -1,0 +1,52 @@
+"""Named arrays the compiled kernel works in: the tree's structure and the per-call scratch space.
+
+numba compiles attribute access on a namedtuple to a fixed field, so the kernel reads ``ws.M``
+rather than element 14 of a tuple, and a field cannot be mixed up with its neighbour.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+from . import layout as L
+
+TreeArrays = namedtuple("TreeArrays", "parent R_tree p_tree axis mass com inertia gravity")
+
+Workspace = namedtuple("Workspace", [
+    # world kinematics of every body (rigid_body.kinematics)
+    "Rw", "ow", "aw", "cw", "Iw", "tmp33",
+    # recursions (RNEA, CRBA)
+    "w", "dw", "ao", "F", "N", "mc", "hc", "Ic",
+    # mass matrix, its factor, bias forces, zero accelerations
+    "M", "Lf", "bias", "zero",
+    # per joint: right-hand side, damping slope, friction and its slope, actuator work, stop stiffness
+    "rhs", "Dlin", "Ffr", "Sfr", "Tact", "Kst",
+    # per actuator: metering spool position of the substep
+    "spool_s",
+    # command-chain discretisation scratch
+    "Acc", "Bcc", "expw",
+    # backup of the state for the roll-back on a non-finite state
+    "bq", "bs", "bg",
+])
+
+
+def tree_arrays(tree, lowered) -> TreeArrays:
+    """The kinematic tree with the lowered (payload-adjusted) masses and inertias."""
+    return TreeArrays(tree.parent, tree.R_tree, tree.p_tree, tree.axis, lowered.mass, lowered.com,
+                      lowered.inertia, tree.gravity)
+
+
+def make_workspace(n: int, na: int) -> Workspace:
+    """Scratch space for a tree of ``n`` joints driven by ``na`` actuators."""
+    z = np.zeros
+    return Workspace(
+        Rw=z((n, 3, 3)), ow=z((n, 3)), aw=z((n, 3)), cw=z((n, 3)), Iw=z((n, 3, 3)), tmp33=z((3, 3)),
+        w=z((n, 3)), dw=z((n, 3)), ao=z((n, 3)), F=z((n, 3)), N=z((n, 3)), mc=z(n), hc=z((n, 3)), Ic=z((n, 3, 3)),
+        M=z((n, n)), Lf=z((n, n)), bias=z(n), zero=z(n),
+        rhs=z(n), Dlin=z(n), Ffr=z(n), Sfr=z(n), Tact=z(n), Kst=z(n),
+        spool_s=z(na),
+        Acc=z((5, 5)), Bcc=z((5, 2)), expw=z((4, 7, 7)),
+        bq=z((2, n)), bs=z((na, L.XS_N)), bg=z(L.XG_N),
+    )
