@@ -1,29 +1,34 @@
-"""The dataset CSV format shared by ``excite``, ``simulate``, recordings and ``diagnose``.
+"""The dataset format shared by ``excite``, ``simulate``, ``import``, recordings and ``diagnose``, as
+CSV or Parquet (chosen by the file suffix: ``.parquet``/``.pq``, else CSV).
 
-Columns: ``time`` (s, strictly increasing), ``u_<joint>`` (V), ``q_<joint>`` (measured angle, rad,
-sensed joints), ``p_<joint>_a`` and ``p_<joint>_b`` (chamber pressures, Pa). Errors name the
-column and the row (data rows count from 1; the header is line 1 of the file).
+Columns: ``time`` (s, strictly increasing), ``u_<joint>`` (V), ``q_<joint>`` (measured position,
+sensed joints: rad for a revolute joint, m for a prismatic one), ``p_<joint>_a`` and ``p_<joint>_b``
+(chamber pressures, Pa gauge). CSV: a header row, ``,`` between values, 10 significant digits.
+Parquet: one float64 column per dataset column, units and robot in the schema metadata (see
+:mod:`sim_core.ingest.parquet`). Errors name the column and the row (data rows count from 1; in a
+CSV the header is line 1 of the file).
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+CSV_DIGITS = 10     # significant digits written to a dataset CSV
+
 
 class DatasetError(ValueError):
-    """The CSV is not a valid dataset; the message names the column and row."""
+    """The file is not a valid dataset; the message names the column and row."""
 
 
 @dataclass
 class Dataset:
     columns: list[str]
     data: np.ndarray  # [rows, columns]
+    units: dict[str, str] = field(default_factory=dict)   # as stored in the file (Parquet metadata), if any
+    robot: str | None = None                               # as stored in the file, if any
 
     def __contains__(self, name: str) -> bool:
         return name in self.columns
@@ -42,44 +47,78 @@ class Dataset:
         return self.data.shape[0]
 
 
+def column_unit(name: str, spec=None) -> str:
+    """SI unit of a dataset column (a ``q_`` column is in m on a prismatic joint of ``spec``)."""
+    if name == "time":
+        return "s"
+    if name.startswith("u_"):
+        return "V"
+    if name.startswith("p_"):
+        return "Pa"
+    if name.startswith("q_"):
+        if spec is not None and name[2:] in spec.joint_names:
+            from .ingest.columns import PRISMATIC, joint_type
+
+            return "m" if joint_type(spec, name[2:]) == PRISMATIC else "rad"
+        return "rad"
+    return ""
+
+
+def dataset_units(columns, spec=None) -> dict[str, str]:
+    return {c: column_unit(c, spec) for c in columns}
+
+
+def read_dataset(path: str | Path) -> Dataset:
+    """A dataset file, CSV or Parquet by suffix."""
+    from .ingest.parquet import is_parquet
+
+    return read_parquet(path) if is_parquet(path) else read_csv(path)
+
+
+def write_dataset(path: str | Path, columns: dict[str, np.ndarray], *, spec=None, robot: str | None = None) -> None:
+    """Write a dataset, CSV or Parquet by suffix (Parquet records units and the robot)."""
+    from .ingest.parquet import is_parquet
+
+    if is_parquet(path):
+        write_parquet(path, columns, units=dataset_units(columns, spec),
+                      robot=robot or (spec.name if spec is not None else None))
+    else:
+        write_csv(path, columns)
+
+
 def read_csv(path: str | Path) -> Dataset:
     """Read a numeric CSV with a header row; reports the first unreadable cell by column and row."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: no such file") from None
-    except UnicodeDecodeError:
-        raise DatasetError(f"{path}: not a text CSV file") from None
-    reader = csv.reader(io.StringIO(text))
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise DatasetError(f"{path}: empty file (expected a header row)") from None
-    if len(set(header)) != len(header):
-        dup = sorted({h for h in header if header.count(h) > 1})
-        raise DatasetError(f"{path}: duplicate column(s) {', '.join(dup)}")
-    if any(not h for h in header):
-        raise DatasetError(f"{path}: empty column name in the header")
-    rows = []
-    for r, row in enumerate(reader, start=1):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise DatasetError(f"{path}: row {r} (line {r + 1}) has {len(row)} values, the header has {len(header)}")
-        vals = []
-        for c, cell in enumerate(row):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise DatasetError(f"{path}: column {header[c]!r}: row {r} (line {r + 1}): {cell.strip()!r} is not a number") from None
-            if not math.isfinite(v):
-                raise DatasetError(f"{path}: column {header[c]!r}: row {r} (line {r + 1}): {cell.strip()} is not a finite number")
-            vals.append(v)
-        rows.append(vals)
-    if not rows:
+    from .ingest.text import open_text, read_columns
+
+    layout = open_text(path, header=True, delimiter=",")
+    cols = read_columns(layout, list(range(layout.n_fields)), [repr(n) for n in layout.names])
+    return Dataset(list(layout.names), cols.data)
+
+
+def read_parquet(path: str | Path) -> Dataset:
+    """A dataset Parquet file; units other than the dataset's SI units are refused (read such a file
+    with ``--column NAME=NAME:UNIT``)."""
+    from .ingest.parquet import ParquetTable
+
+    pt = ParquetTable(path)
+    if pt.rows == 0:
         raise DatasetError(f"{path}: no data rows")
-    return Dataset(header, np.array(rows, dtype=float))
+    for name, unit in pt.units.items():
+        si = column_unit(name)
+        if si and unit not in (si, "m" if si == "rad" else si):
+            raise DatasetError(f"{path}: column {name!r} is in {unit} (schema metadata hydrohil.units); a dataset is "
+                               f"in SI units ({si}): read it with --column {name}={name}:{unit}")
+    data = np.column_stack([pt.column(n) for n in pt.names]) if pt.names else np.zeros((pt.rows, 0))
+    return Dataset(list(pt.names), data, dict(pt.units), pt.robot)
+
+
+def write_parquet(path: str | Path, columns: dict[str, np.ndarray], *, units: dict[str, str] | None = None,
+                  robot: str | None = None) -> None:
+    from .ingest.parquet import write_parquet as _write
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write(path, columns, units=units if units is not None else dataset_units(columns), robot=robot)
 
 
 def check_time(ds: Dataset, where: str = "") -> None:
@@ -99,15 +138,40 @@ def check_time(ds: Dataset, where: str = "") -> None:
 
 
 def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> None:
-    """Write columns (equal length) with full float precision; time first."""
+    """Write columns (equal length) with CSV_DIGITS significant digits; time first."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
     names = list(columns)
-    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     path = Path(path)
-    if path.parent and not path.parent.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
-        fh.write(",".join(names) + "\n")
-        np.savetxt(fh, data, delimiter=",", fmt="%.10g")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = pa.table({n: pa.array(round_significant(np.asarray(columns[n], dtype=float), CSV_DIGITS)) for n in names})
+    with open(path, "wb") as fh:
+        fh.write((",".join(names) + "\n").encode())
+        pacsv.write_csv(table, fh, pacsv.WriteOptions(include_header=False))
+
+
+def round_significant(x: np.ndarray, digits: int) -> np.ndarray:
+    """``x`` rounded to ``digits`` significant decimal digits, so that the shortest text of each value
+    (what the CSV writer prints) has at most that many digits, like ``%.{digits}g``."""
+    x = np.asarray(x, dtype=float)
+    out = x.copy()
+    nz = np.isfinite(x) & (x != 0.0)
+    if not nz.any():
+        return out
+    v = x[nz]
+    k = (digits - 1) - np.floor(np.log10(np.abs(v))).astype(np.int64)
+    r = np.empty_like(v)
+    pos = (k >= 0) & (k <= 22)       # powers of ten up to 1e22 are exact doubles
+    p = 10.0 ** k[pos]
+    r[pos] = np.round(v[pos] * p) / p
+    neg = (k < 0) & (k >= -22)
+    q = 10.0 ** (-k[neg])
+    r[neg] = np.round(v[neg] / q) * q
+    rest = ~(pos | neg)              # below 1e-13 or above 1e31: rare, formatted one by one
+    r[rest] = [float(f"{a:.{digits}g}") for a in v[rest]]
+    out[nz] = r
+    return out
 
 
 def input_matrix(ds: Dataset, spec, where: str = "") -> np.ndarray:

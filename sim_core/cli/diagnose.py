@@ -2,6 +2,7 @@
 
 
 def register(sub):
+    from ..ingest import add_reading_options
     from .common import add_model_options
 
     p = sub.add_parser(
@@ -12,9 +13,10 @@ def register(sub):
                     "DIR/diagnosis.json, DIR/report.html and DIR/extended.toml (a --params file).",
     )
     p.add_argument("--robot", required=True)
-    p.add_argument("data", metavar="DATA.csv", help="measured record (dataset CSV: time, u_<joint>, q_<joint>, p_<joint>_a/b)")
+    p.add_argument("data", metavar="DATA.csv", help="measured record: a dataset (.csv or .parquet: time, u_<joint>, "
+                   "q_<joint>, p_<joint>_a/b), or any log file read with the reading options below")
     p.add_argument("--validation", metavar="OTHER.csv",
-                   help="separate validation record (default: the last 40 %% of DATA.csv)")
+                   help="separate validation record, read like DATA (default: the last 40 %% of DATA)")
     p.add_argument("--report", required=True, metavar="DIR", help="output directory")
     p.add_argument("--format", choices=("html", "md"), default="html", help="report format (default html)")
     p.add_argument("--workers", type=int, default=0, help="parallel processes for the candidate fits (default: CPU count)")
@@ -24,6 +26,7 @@ def register(sub):
                         "auto (the spec's unless the record starts more than 0.1 rad away)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_model_options(p)
+    add_reading_options(p)
     p.set_defaults(func=run)
 
 
@@ -33,6 +36,7 @@ def run(args):
     from ..effects import EFFECTS
     from ..identification import diagnosis, report
     from ..identification.record import load_record
+    from ..ingest import options_from_args
     from . import CliError
     from .common import load_configured_robot
 
@@ -43,8 +47,9 @@ def run(args):
         if bad:
             raise CliError(f"--effects: unknown effect(s) {', '.join(bad)}; effects: {', '.join(EFFECTS)}")
     spec = load_configured_robot(args)
-    rec = load_record(args.data, spec, initial_pose=args.initial_pose)
-    val = load_record(args.validation, spec, initial_pose=args.initial_pose) if args.validation else None
+    opts = options_from_args(args)   # the validation record comes from the same logger: same options
+    rec = load_record(args.data, spec, initial_pose=args.initial_pose, options=opts)
+    val = load_record(args.validation, spec, initial_pose=args.initial_pose, options=opts) if args.validation else None
     log = (lambda msg: None) if args.quiet else (lambda msg: print(msg, file=sys.stderr))
     d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
                       log=log, effects=args.effects)

@@ -1,4 +1,4 @@
-"""hydrohil excite: a multi-level PRBS command file for one joint."""
+"""hydrohil excite: a multi-level PRBS command file (CSV or Parquet) for one joint."""
 
 
 def register(sub):
@@ -13,12 +13,12 @@ def register(sub):
     p.add_argument("--period", type=float, default=0.5, help="PRBS clock period (s, default 0.5)")
     p.add_argument("--no-guard", action="store_true",
                    help="do not mirror levels that the nominal model predicts would hit an end stop")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, metavar="IN.csv", help="input file to write (.csv or .parquet)")
     p.set_defaults(func=run)
 
 
 def run(args):
-    from ..dataset import write_csv
+    from ..dataset import write_dataset
     from ..excitation import multilevel_prbs
     from ..model.spec import load_robot
     from . import CliError
@@ -31,6 +31,6 @@ def run(args):
     cols = {"time": t}
     for a, j in enumerate(spec.joint_names):
         cols[f"u_{j}"] = U[:, a]
-    write_csv(args.out, cols)
+    write_dataset(args.out, cols, spec=spec)
     print(f"wrote {args.out}: {len(t)} rows, {t[-1]:g} s at {args.rate:g} Hz, joint {args.joint}")
     return 0

@@ -2,6 +2,7 @@
 
 
 def register(sub):
+    from ..ingest import add_reading_options
     from .common import add_model_options
 
     p = sub.add_parser(
@@ -13,16 +14,18 @@ def register(sub):
                     "joints.j2.sensor.B, supply.pressure) or effect parameters (effects.deadband.boom.width).",
     )
     p.add_argument("--robot", required=True)
-    p.add_argument("data", metavar="DATA.csv", help="measured record (dataset CSV)")
+    p.add_argument("data", metavar="DATA.csv", help="measured record: a dataset (.csv or .parquet), or any log file "
+                   "read with the reading options below")
     p.add_argument("--free", nargs="+", metavar="PARAM", help="parameters to fit (default: valve rated_flow of each "
                    "commanded, measured joint)")
     p.add_argument("--out", required=True, metavar="PARAMS.toml", help="parameter/effect file to write")
-    p.add_argument("--validation", metavar="OTHER.csv", help="also report the fit on this record")
+    p.add_argument("--validation", metavar="OTHER.csv", help="also report the fit on this record (read like DATA)")
     p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
                    help="where the simulation starts (see 'hydrohil diagnose --help')")
     p.add_argument("--max-simulations", type=int, default=80, help="budget of model simulations (default 80)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     add_model_options(p)
+    add_reading_options(p)
     p.set_defaults(func=run)
 
 
@@ -31,14 +34,16 @@ def run(args):
 
     from ..identification.fitting import run_fit
     from ..identification.record import load_record
+    from ..ingest import options_from_args
     from . import CliError
     from .common import load_configured_robot
 
     if args.max_simulations < 2:
         raise CliError(f"--max-simulations {args.max_simulations}: need at least 2")
     spec = load_configured_robot(args)
-    rec = load_record(args.data, spec, initial_pose=args.initial_pose)
-    val = load_record(args.validation, spec, initial_pose=args.initial_pose) if args.validation else None
+    opts = options_from_args(args)   # the validation record comes from the same logger: same options
+    rec = load_record(args.data, spec, initial_pose=args.initial_pose, options=opts)
+    val = load_record(args.validation, spec, initial_pose=args.initial_pose, options=opts) if args.validation else None
     res = run_fit(spec, rec, args.free, val=val, max_sims=args.max_simulations, out=args.out)
     if args.json:
         print(json.dumps(res, indent=2))

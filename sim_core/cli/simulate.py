@@ -1,14 +1,18 @@
-"""hydrohil simulate: run the plant open-loop on an input CSV and write the dataset CSV."""
+"""hydrohil simulate: run the plant open-loop on an input file and write the dataset (CSV or Parquet)."""
 
 
 def register(sub):
+    from ..ingest import add_reading_options
     from .common import add_model_options
 
-    p = sub.add_parser("simulate", help="simulate an input CSV (time, u_<joint>) and write a dataset CSV")
+    p = sub.add_parser("simulate", help="simulate an input file (time, u_<joint>) and write a dataset CSV/Parquet")
     p.add_argument("--robot", required=True)
-    p.add_argument("--input", required=True, metavar="IN.csv")
-    p.add_argument("--out", required=True, metavar="OUT.csv")
+    p.add_argument("--input", required=True, metavar="IN.csv",
+                   help="commands: a dataset (.csv or .parquet) with time and u_<joint>, or any log file read with the "
+                        "reading options below")
+    p.add_argument("--out", required=True, metavar="OUT.csv", help="dataset to write (.csv or .parquet)")
     add_model_options(p)
+    add_reading_options(p)
     p.add_argument("--noise-angle", type=float, metavar="RAD",
                    help="standard deviation of the angle measurement noise (rad); default: the sensors' own")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
@@ -17,8 +21,10 @@ def register(sub):
 
 def run(args):
     import math
+    import sys
 
-    from ..dataset import input_matrix, read_csv, write_csv
+    from ..dataset import input_matrix, write_dataset
+    from ..ingest import options_from_args, read_input
     from ..plant import Plant
     from ..simulator import Simulator
     from . import CliError
@@ -31,12 +37,15 @@ def run(args):
         for j in spec.joints:
             if j.sensed:
                 spec.set(f"joints.{j.name}.sensor.noise", args.noise_angle / abs(j.components["sensor"]["A"]))
-    ds = read_csv(args.input)
+    imp = read_input(args.input, spec, options_from_args(args))
+    for note in imp.notes:
+        print(f"{args.input}: {note}", file=sys.stderr)
+    ds = imp.dataset
     U = input_matrix(ds, spec, where=f"{args.input}: ")
     ctx = Plant(spec).create_context(seed=args.seed)
     traj = Simulator(ctx).run(ds.time - ds.time[0] + 0.0, U)
     cols = traj.dataset_columns()
     cols["time"] = ds.time
-    write_csv(args.out, cols)
+    write_dataset(args.out, cols, spec=spec)
     print(f"wrote {args.out}: {len(ds)} rows, joints {', '.join(spec.joint_names)}")
     return 0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import Dataset, DatasetError, input_matrix, read_csv
+from ..dataset import Dataset, DatasetError, input_matrix
 from .metrics import fit_ceiling, noise_std
 
 ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
@@ -88,10 +88,17 @@ class DataCheck:
         }
 
 
-def load_record(path: str | Path, spec, *, initial_pose: str = "auto", label: str | None = None) -> Record:
-    """Read a dataset CSV and check it against ``spec``; errors name the column (and row)."""
-    ds = read_csv(path)
-    return record_from_dataset(ds, spec, source=label or str(path), initial_pose=initial_pose)
+def load_record(path: str | Path, spec, *, initial_pose: str = "auto", label: str | None = None,
+                options=None) -> Record:
+    """Read a record and check it against ``spec``; errors name the column (and row). ``options``
+    (:class:`sim_core.ingest.ReadOptions`) read a log file that is not a dataset (CSV or Parquet) as it
+    is; what the reading found (units, time grid, saturation) opens the record's notes."""
+    from ..ingest import read_input
+
+    imp = read_input(path, spec, options)
+    rec = record_from_dataset(imp.dataset, spec, source=label or str(path), initial_pose=initial_pose)
+    rec.notes[:0] = imp.notes
+    return rec
 
 
 def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "auto") -> Record:

@@ -1,0 +1,18 @@
+"""Reading measured records: any delimited text or Parquet log file, mapped onto the dataset columns of
+a robot, converted to SI and checked (time grid, converter saturation, command range).
+
+    text.py        delimited text tables (fast path, and a slow path naming the bad cell)
+    parquet.py     datasets as Parquet (units and robot in the schema metadata)
+    columns.py     --column NAME=SOURCE[:UNIT]; dataset columns of a robot
+    units.py       units and their conversion to SI (incl. sensor volts, raw counts)
+    timegrid.py    jitter, gaps, repeated timestamps, time going backwards
+    saturation.py  samples at a converter's full scale
+    options.py     the reading options, one definition for every command
+    reader.py      import_record / read_input: all of the above for one file
+"""
+
+from .options import ReadOptions, add_reading_options, options_from_args
+from .reader import ColumnReport, ImportResult, import_record, read_input
+
+__all__ = ["ReadOptions", "add_reading_options", "options_from_args", "ColumnReport", "ImportResult",
+           "import_record", "read_input"]

@@ -1,0 +1,64 @@
+"""The reading options, defined once for ``import``, ``simulate --input``, ``fit`` and ``diagnose``."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+SATURATION_POLICIES = ("mask", "fail")
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read a log file. The defaults read a dataset file as it is."""
+
+    columns: tuple[str, ...] = ()     # "NAME=SOURCE[:UNIT]"
+    no_header: bool = False           # the first line is data (default: detected)
+    delimiter: str | None = None      # one character, 'tab' or 'space' (default: detected)
+    rate: float | None = None         # Hz, when the file has no time column
+    skip_rows: int = 0                # lines before the header (or the data)
+    saturation: str = "mask"          # converter saturation on a measured column: mask or fail
+
+    @property
+    def given(self) -> bool:
+        """Whether any option asks for more than reading a dataset file as it is."""
+        return bool(self.columns or self.no_header or self.delimiter is not None or self.rate is not None
+                    or self.skip_rows or self.saturation != "mask")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["columns"] = list(self.columns)
+        return d
+
+
+def add_reading_options(p) -> None:
+    """Add the reading options to an argparse (sub)parser."""
+    g = p.add_argument_group(
+        "reading a log file",
+        "Any delimited text (or Parquet) file, mapped onto the dataset columns; without these options the "
+        "file must be a dataset (time, u_<joint>, q_<joint>, p_<joint>_a/_b in SI units). See 'hydrohil import'.")
+    g.add_argument("--column", action="append", default=[], metavar="NAME=SOURCE[:UNIT]",
+                   help="dataset column NAME (time, u_<joint>, q_<joint>, p_<joint>_a, p_<joint>_b) from the file "
+                        "column SOURCE (header name or 0-based index) in UNIT: s, ms; V, mV; rad, deg (revolute) or m, "
+                        "mm (prismatic); Pa, kPa, bar, MPa, psi; sensor_volts (the joint's sensor model A*v+B); "
+                        "*SCALE+OFFSET (raw counts). Default unit: SI. Repeatable; header columns named like "
+                        "dataset columns are read as they are")
+    g.add_argument("--no-header", action="store_true",
+                   help="the first line is data (default: detected, a first line of numbers only is data)")
+    g.add_argument("--delimiter", metavar="D", help="one character, 'tab' or 'space' (default: detected: tab, ';', "
+                                                    "',', '|' or whitespace)")
+    g.add_argument("--rate", type=float, metavar="HZ", help="sample rate when the file has no time column")
+    g.add_argument("--skip-rows", type=int, default=0, metavar="N", help="lines to skip before the header or data")
+    g.add_argument("--saturation", choices=SATURATION_POLICIES, default="mask",
+                   help="measured samples at a converter's full scale: mask (keep, report and mark them; default) "
+                        "or fail")
+
+
+def options_from_args(args) -> ReadOptions:
+    return ReadOptions(
+        columns=tuple(getattr(args, "column", None) or ()),
+        no_header=bool(getattr(args, "no_header", False)),
+        delimiter=getattr(args, "delimiter", None),
+        rate=getattr(args, "rate", None),
+        skip_rows=int(getattr(args, "skip_rows", 0) or 0),
+        saturation=getattr(args, "saturation", "mask"),
+    )

@@ -1,0 +1,84 @@
+"""Datasets as Parquet: one float64 column per dataset column (the CSV's names), units and robot in the
+schema metadata (``hydrohil.units``: JSON {column: unit}; ``hydrohil.robot``: the robot's name).
+The HIL recorder writes the same layout."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+UNITS_KEY = b"hydrohil.units"
+ROBOT_KEY = b"hydrohil.robot"
+SUFFIXES = (".parquet", ".pq")
+
+
+def is_parquet(path: str | Path) -> bool:
+    return Path(path).suffix.lower() in SUFFIXES
+
+
+def _error(msg: str) -> Exception:
+    from ..dataset import DatasetError
+
+    return DatasetError(msg)
+
+
+def write_parquet(path: str | Path, columns: dict[str, np.ndarray], *, units: dict[str, str] | None = None,
+                  robot: str | None = None, compression: str = "zstd") -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    meta = {UNITS_KEY: json.dumps(units or {}).encode()}
+    if robot:
+        meta[ROBOT_KEY] = robot.encode()
+    table = pa.table({n: pa.array(np.asarray(v, dtype=np.float64)) for n, v in columns.items()}).replace_schema_metadata(meta)
+    pq.write_table(table, str(path), compression=compression)
+
+
+class ParquetTable:
+    """A Parquet file's columns, read on demand as float64 with messages naming column and row."""
+
+    def __init__(self, path: str | Path):
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise _error(f"{self.path}: no such file")
+        try:
+            self._file = pq.ParquetFile(str(self.path))
+        except (pa.ArrowException, OSError) as exc:
+            raise _error(f"{self.path}: not a readable Parquet file ({exc})") from None
+        schema = self._file.schema_arrow
+        self.names: list[str] = list(schema.names)
+        meta = schema.metadata or {}
+        try:
+            self.units: dict[str, str] = json.loads(meta.get(UNITS_KEY, b"{}").decode())
+        except (ValueError, UnicodeDecodeError):
+            raise _error(f"{self.path}: schema metadata hydrohil.units is not JSON") from None
+        self.robot: str | None = meta[ROBOT_KEY].decode() if ROBOT_KEY in meta else None
+        self.rows = self._file.metadata.num_rows
+        self._types = {f.name: f.type for f in schema}
+
+    def column(self, name: str) -> np.ndarray:
+        """Column ``name`` as float64; errors for text columns, missing and non-finite values."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        typ = self._types[name]
+        if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)):
+            raise _error(f"{self.path}: column {name!r} holds {typ}, not numbers")
+        try:
+            col = self._file.read(columns=[name]).column(0)
+        except (pa.ArrowException, OSError) as exc:
+            raise _error(f"{self.path}: column {name!r} cannot be read ({exc})") from None
+        if col.null_count:
+            r = int(pc.index(pc.is_null(col), True).as_py()) + 1
+            raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value)")
+        out = np.asarray(col.cast(pa.float64()).to_numpy(), dtype=np.float64)
+        bad = np.flatnonzero(~np.isfinite(out))
+        if bad.size:
+            r = int(bad[0]) + 1
+            raise _error(f"{self.path}: column {name!r}: row {r}: {out[r - 1]} is not a finite number")
+        return out

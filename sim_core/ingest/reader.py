@@ -1,0 +1,342 @@
+"""A measured record into a dataset of a robot: columns mapped by ``--column``, converted to SI,
+checked (time grid, converter saturation, command range) and reported.
+
+:func:`import_record` is ``hydrohil import``; :func:`read_input` is what ``simulate``, ``fit`` and
+``diagnose`` call: a dataset file as it is when no reading option is given, else the import.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..dataset import Dataset, DatasetError, check_time, read_dataset
+from .columns import ColumnMap, column_kind, dataset_order, parse_column
+from .options import ReadOptions
+from .parquet import ParquetTable, is_parquet
+from .saturation import Saturation, find_saturation
+from .text import TextLayout, open_text, parse_delimiter, read_columns
+from .timegrid import TimeGrid, check_grid, regular_grid
+from .units import Unit, parse_unit
+
+MEASURED_KINDS = ("angle", "position", "pressure")
+OUTSIDE_RANGE_MARGIN = 0.1      # rad (or m): further outside a joint's limits hints at a wrong unit
+
+
+@dataclass
+class ColumnReport:
+    """One dataset column: where it came from, its unit, and what it holds after conversion."""
+
+    name: str
+    source: str                 # "column 3" or "header 'pos_mm'"
+    unit: Unit
+    min: float
+    max: float
+    saturation: Saturation | None = None
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "unit": self.unit.text, "si_unit": self.unit.si,
+                "conversion": {"scale": self.unit.scale, "offset": self.unit.offset, "text": self.unit.describe()},
+                "min": self.min, "max": self.max,
+                "saturation": self.saturation.to_dict() if self.saturation else None}
+
+
+@dataclass
+class ImportResult:
+    """A record read for a robot: the dataset (SI, time from 0) and what was found on the way."""
+
+    source: str
+    robot: str
+    dataset: Dataset
+    columns: list[ColumnReport]
+    grid: TimeGrid
+    notes: list[str] = field(default_factory=list)
+    valid: dict[str, np.ndarray] = field(default_factory=dict)   # measured column -> False where saturated
+    options: ReadOptions | None = None
+
+    def to_dict(self) -> dict:
+        """The JSON sidecar: which column was what, the time grid and the notes."""
+        return {
+            "source": self.source, "robot": self.robot, "rows": len(self.dataset),
+            "rate_hz": self.grid.rate_hz, "duration_s": self.grid.duration_s,
+            "time_grid": self.grid.to_dict(),
+            "columns": {c.name: c.to_dict() for c in self.columns},
+            "masked": {name: _false_runs(ok) for name, ok in self.valid.items()},
+            "options": self.options.to_dict() if self.options else None,
+            "notes": list(self.notes),
+        }
+
+    def summary_lines(self) -> list[str]:
+        g = self.grid
+        out = [f"{self.source}: {len(self.dataset)} rows, {g.rate_hz:.4g} Hz (median period {1e3 * g.median_period_s:.4g} ms), "
+               f"{g.duration_s:.4g} s"]
+        w = max(len(c.name) for c in self.columns)
+        for c in self.columns:
+            sat = f"  SATURATED {c.saturation.samples} sample(s)" if c.saturation else ""
+            out.append(f"  {c.name:<{w}} <- {c.source} ({c.unit.describe()}): {c.min:.6g} .. {c.max:.6g} {c.unit.si}{sat}")
+        return out
+
+
+def _false_runs(ok: np.ndarray) -> list[list[int]]:
+    """[first, last] dataset rows (0-based) of each run of False."""
+    edges = np.diff(np.concatenate(([0], (~ok).astype(np.int8), [0])))
+    return [[int(a), int(b) - 1] for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> ImportResult:
+    """The record ``simulate``, ``fit`` and ``diagnose`` read: with no reading option given, a dataset
+    file (CSV or Parquet) taken as it is, under the dataset's strict rules; else :func:`import_record`."""
+    if options is not None and options.given:
+        return import_record(path, spec, options)
+    where = f"{path}: "
+    ds = read_dataset(path)
+    check_time(ds, where)
+    notes = []
+    if ds.robot and ds.robot != spec.name:
+        notes.append(f"{path}: recorded on robot {ds.robot!r}, read for {spec.name!r}")
+    t = ds.time
+    grid, _ = check_grid(t, where=where, label="'time'", place=lambda r: f"row {r} (line {r + 1})" if not is_parquet(path) else f"row {r}")
+    reports = []
+    for c, name in enumerate(ds.columns):
+        col = ds.data[:, c]
+        try:
+            kind, _ = column_kind(name, spec)
+        except ValueError:
+            continue
+        reports.append(ColumnReport(name, f"header {name!r}", parse_unit(None, kind, column=name),
+                                    float(col.min()), float(col.max())))
+    return ImportResult(str(path), spec.name, ds, reports, grid, notes, {}, options)
+
+
+def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
+    """Read a log file (delimited text or Parquet) as a dataset of ``spec``. Errors
+    (:class:`DatasetError`) name the file, the column and the row."""
+    path = Path(path)
+    where = f"{path}: "
+    maps = [parse_column(c) for c in options.columns]
+    seen: dict[str, str] = {}
+    for m in maps:
+        column_kind(m.name, spec)      # a dataset column of this robot
+        if m.name in seen:
+            raise DatasetError(f"--column {m.text!r}: {m.name} is already mapped by --column {seen[m.name]!r}")
+        seen[m.name] = m.text
+    if options.rate is not None and not (np.isfinite(options.rate) and options.rate > 0):
+        raise DatasetError(f"--rate {options.rate:g}: must be a positive number of samples per second (Hz)")
+    source = _open_source(path, options)
+    notes = list(source.notes)
+    maps = maps + source.implicit_maps(maps, spec, notes)
+    if not maps:
+        raise DatasetError(f"{where}no column maps to the dataset of {spec.name}: map them with --column NAME=SOURCE[:UNIT] "
+                           f"(e.g. --column time=0:s --column u_{spec.joint_names[0]}=1:V)")
+    has_time = any(m.name == "time" for m in maps)
+    if has_time and options.rate is not None:
+        raise DatasetError(f"{where}both a time column and --rate {options.rate:g}: give one (the time column keeps the "
+                           f"real grid, --rate assumes a regular one)")
+    if not has_time and options.rate is None:
+        raise DatasetError(f"{where}no time column: map one with --column time=SOURCE[:s|ms], or give the sample rate "
+                           f"with --rate HZ")
+    units = [_unit(m, spec, source) for m in maps]
+    raw, place = source.read([m.source for m in maps], [m.source_label for m in maps])
+    rows = raw.shape[0]
+
+    # time grid first: it decides which rows stay
+    if has_time:
+        k = next(i for i, m in enumerate(maps) if m.name == "time")
+        t = units[k].convert(raw[:, k])
+        grid, keep = check_grid(t, where=where, label=f"time ({maps[k].source_label})", place=place)
+        t = t[keep] - t[keep][0]
+    else:
+        if rows < 2:
+            raise DatasetError(f"{where}{rows} row(s); a record needs at least 2")
+        grid, keep = regular_grid(rows, options.rate), np.ones(rows, dtype=bool)
+        t = np.arange(rows) / options.rate
+    notes += grid.notes()
+
+    columns: dict[str, np.ndarray] = {"time": t}
+    reports: list[ColumnReport] = []
+    valid: dict[str, np.ndarray] = {}
+    for i, (m, u) in enumerate(zip(maps, units)):
+        if m.name == "time":
+            reports.append(ColumnReport("time", m.source_label, u, 0.0, float(t[-1])))
+            continue
+        kind, joint = column_kind(m.name, spec)
+        sat = find_saturation(raw[:, i], u) if kind != "time" else None
+        report_sat = None
+        if sat is not None:
+            s, mask = sat
+            report_sat = s
+            notes.append(_saturation_note(m, s, u, kind, options))
+            if kind in MEASURED_KINDS:
+                if options.saturation == "fail":
+                    r = s.first_row
+                    raise DatasetError(f"{where}column {m.name} ({m.source_label}): {place(r)}: "
+                                       f"{raw[r - 1, i]:g} is at the converter's full scale ({s.converter}); "
+                                       f"{s.samples} sample(s) in {s.runs} run(s) (--saturation fail)")
+                valid[m.name] = ~mask[keep]
+        v = u.convert(raw[:, i])
+        if kind == "command":
+            _check_command(v, m, spec.joint(joint), where, place)
+        if kind in ("angle", "position") and joint is not None:
+            _note_outside_range(v, m, u, spec, joint, notes)
+        v = v[keep]
+        columns[m.name] = v
+        reports.append(ColumnReport(m.name, m.source_label, u, float(v.min()), float(v.max()), report_sat))
+    order = dataset_order(columns, spec)
+    ds = Dataset(order, np.column_stack([columns[c] for c in order]),
+                 {r.name: r.unit.si for r in reports}, spec.name)
+    reports.sort(key=lambda r: order.index(r.name))
+    if not has_time:
+        reports.insert(0, ColumnReport("time", f"--rate {options.rate:g} Hz", parse_unit(None, "time", column="time"),
+                                       0.0, float(t[-1])))
+    return ImportResult(str(path), spec.name, ds, reports, grid, notes, valid, options)
+
+
+def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
+    """The column's unit: as given, else as the file's metadata says (Parquet), else SI."""
+    kind, joint = column_kind(m.name, spec)
+    text = m.unit if m.unit is not None else source.unit_of(source.names[source.resolve(m)]) if source.names else None
+    sensor = None
+    if joint is not None and kind in ("angle", "position"):
+        js = spec.joint(joint)
+        if js.sensed:
+            s = js.components["sensor"]
+            sensor = {"A": s["A"], "B": s["B"], "range": s["range"]}
+    try:
+        return parse_unit(text, kind, column=m.name, sensor=sensor)
+    except ValueError as exc:
+        raise DatasetError(f"--column {m.text!r}: {exc}") from None
+
+
+def _check_command(v: np.ndarray, m: ColumnMap, js, where: str, place) -> None:
+    lo, hi = js.command_range
+    bad = np.flatnonzero((v < lo) | (v > hi))
+    if bad.size:
+        r = int(bad[0]) + 1
+        raise DatasetError(
+            f"{where}column {m.name} ({m.source_label}): {place(r)}: {v[r - 1]:g} V is outside the "
+            f"joint's command range [{lo:g}, {hi:g}] V; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)"
+        )
+
+
+def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[str]) -> None:
+    tree = spec.tree
+    i = tree.index(spec.joint(joint).dof)
+    lo, hi = float(tree.lower[i]), float(tree.upper[i])
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return
+    out = (v < lo - OUTSIDE_RANGE_MARGIN) | (v > hi + OUTSIDE_RANGE_MARGIN)
+    if out.any():
+        notes.append(f"{m.name}: {100 * out.mean():.3g} % of the samples lie more than {OUTSIDE_RANGE_MARGIN:g} {u.si} "
+                     f"outside the joint's range [{lo:.4g}, {hi:.4g}] {u.si}: check the unit ({u.text}) and the sensor "
+                     f"calibration")
+
+
+def _saturation_note(m: ColumnMap, s: Saturation, u: Unit, kind: str, options: ReadOptions) -> str:
+    runs = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in s.rows[:5]) + (", ..." if s.runs > 5 else "")
+    head = (f"{m.name} ({m.source_label}): {s.samples} sample(s) at the converter's full scale "
+            f"({s.converter}: {s.full_scale[0]:g} / {s.full_scale[1]:g}), {s.runs} run(s), the longest "
+            f"{s.longest_run} sample(s) (rows {runs})")
+    if kind == "command":
+        return head + "; kept: the valve saw the saturated command"
+    return head + "; the true value there is unknown: kept in the dataset, marked invalid (masked) in the import report"
+
+
+class _Source:
+    """The file behind an import: a text table or a Parquet file."""
+
+    notes: list[str]
+    names: list[str] | None
+    n_fields: int
+
+    def index(self, src: str | int, label: str) -> int:
+        raise NotImplementedError
+
+    def implicit_maps(self, maps: list[ColumnMap], spec, notes: list[str]) -> list[ColumnMap]:
+        """Header columns named like dataset columns of ``spec`` and not mapped otherwise: taken as they are (SI)."""
+        if self.names is None:
+            return []
+        targets = {m.name for m in maps}
+        used = set()
+        for m in maps:
+            used.add(self.resolve(m))
+        out = []
+        for i, n in enumerate(self.names):
+            if n in targets or i in used:
+                if n in targets and i not in used:
+                    notes.append(f"file column {n!r} not read: --column maps {n} from another column")
+                continue
+            try:
+                column_kind(n, spec)
+            except ValueError:
+                continue
+            out.append(ColumnMap(n, n, self.unit_of(n), f"{n}={n}"))
+        ignored = [n for i, n in enumerate(self.names) if i not in used and n not in {m.name for m in out}
+                   and n not in targets]
+        if ignored and maps + out:
+            notes.append(f"file columns not read: {', '.join(ignored[:12])}" + (", ..." if len(ignored) > 12 else ""))
+        return out
+
+    def unit_of(self, name: str) -> str | None:
+        return None
+
+    def resolve(self, m: ColumnMap) -> int:
+        path = self.path
+        if isinstance(m.source, int):
+            if m.source >= self.n_fields:
+                raise DatasetError(f"{path}: --column {m.text!r}: column index {m.source} is out of range: the file has "
+                                   f"{self.n_fields} column(s), 0..{self.n_fields - 1}")
+            return m.source
+        if self.names is None:
+            raise DatasetError(f"{path}: --column {m.text!r}: the file has no header row, so {m.source!r} names no "
+                               f"column; refer to columns by 0-based index (0..{self.n_fields - 1})")
+        if m.source not in self.names:
+            hint = ""
+            if ":" in m.source:
+                hint = f" ({m.source.rpartition(':')[2]!r} after ':' is not a unit)"
+            raise DatasetError(f"{path}: --column {m.text!r}: no column {m.source!r} in the header{hint}; columns: "
+                               f"{', '.join(self.names)}")
+        return self.names.index(m.source)
+
+
+class _TextSource(_Source):
+    def __init__(self, path: Path, options: ReadOptions):
+        self.path = path
+        self.layout: TextLayout = open_text(path, header=False if options.no_header else None,
+                                            delimiter=parse_delimiter(options.delimiter), skip_rows=options.skip_rows)
+        self.notes = self.layout.notes
+        self.names = self.layout.names
+        self.n_fields = self.layout.n_fields
+
+    def read(self, sources, labels):
+        idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
+        cols = read_columns(self.layout, idx, labels, cut_last_line=True)
+        return cols.data, lambda r: f"row {r} (line {cols.line(r)})"
+
+
+class _ParquetSource(_Source):
+    def __init__(self, path: Path, options: ReadOptions):
+        if options.no_header or options.delimiter is not None or options.skip_rows:
+            raise DatasetError(f"{path}: --no-header, --delimiter and --skip-rows apply to text files, not Parquet")
+        self.path = path
+        self.table = ParquetTable(path)
+        self.names = self.table.names
+        self.n_fields = len(self.names)
+        self.notes = []
+        if self.table.rows == 0:
+            raise DatasetError(f"{path}: no data rows")
+
+    def unit_of(self, name: str) -> str | None:
+        return self.table.units.get(name)
+
+    def read(self, sources, labels):
+        idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
+        data = np.column_stack([self.table.column(self.names[i]) for i in idx])
+        return data, (lambda r: f"row {r}")
+
+
+def _open_source(path: Path, options: ReadOptions) -> _Source:
+    if is_parquet(path):
+        return _ParquetSource(path, options)
+    return _TextSource(path, options)

@@ -1,0 +1,298 @@
+"""Delimited text tables as loggers write them: with or without a header row, any delimiter, a
+preamble to skip, decimal commas, a last line cut short.
+
+Two steps: :func:`open_text` reads only the first lines (layout: delimiter, header, where the data
+starts); :func:`read_columns` reads the wanted columns as float64. The fast path is pyarrow's CSV
+reader (``np.loadtxt`` for whitespace-separated files); if it fails, or the result holds a missing
+or non-finite value, the slow path reads the file again line by line to name the column, row and
+line of the first bad cell. Rows count data rows from 1 (blank lines are not rows); lines count
+the file's lines from 1.
+"""
+
+from __future__ import annotations
+
+import array
+import csv
+import io
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+BINARY_PROBE = 8192             # bytes looked at to tell a text file from a binary one
+_NUMBER_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+DELIMITER_WORDS = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None, " ": None,
+                   "comma": ",", "semicolon": ";"}
+
+
+def _error(msg: str) -> Exception:
+    from ..dataset import DatasetError
+
+    return DatasetError(msg)
+
+
+@dataclass
+class TextLayout:
+    """Where the data of a text table is and how its lines split."""
+
+    path: Path
+    delimiter: str | None           # one character, or None: runs of whitespace
+    decimal: str                    # '.' or ','
+    names: list[str] | None         # header row, None when the file has none
+    n_fields: int                   # values per row (from the header or the first data row)
+    data_offset: int                # byte offset of the first data line
+    data_line: int                  # its line number (from 1)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def first_row_label(self) -> str:
+        return "the header" if self.names is not None else f"line {self.data_line} (the first row)"
+
+
+@dataclass
+class TextColumns:
+    """Wanted columns of a text table as float64, with the file line of each row."""
+
+    data: np.ndarray                # [rows, k]
+    layout: TextLayout
+    _lines: np.ndarray | None = None
+
+    def line(self, row: int) -> int:
+        """File line number of data row ``row`` (from 1)."""
+        if self._lines is None:
+            self._lines = _data_lines(self.layout)
+        return int(self._lines[row - 1])
+
+
+def parse_delimiter(text: str | None) -> str | None | bool:
+    """``--delimiter`` value: one character, 'tab', 'space'/'whitespace' (runs of blanks); None: detect.
+    Returns the character, None for whitespace, or False for 'detect'."""
+    if text is None:
+        return False
+    key = text if text in DELIMITER_WORDS else text.lower()
+    if key in DELIMITER_WORDS:
+        return DELIMITER_WORDS[key]
+    if len(text) != 1 or text in "\r\n\"" or text.isalnum() or text in ".+-":
+        raise _error(f"--delimiter {text!r}: expected one character (e.g. ',' ';' '|'), 'tab' or 'space'")
+    return text
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return next(csv.reader([line], delimiter=delimiter))
+
+
+def _to_float(cell: str, decimal: str) -> float:
+    s = cell.strip()
+    if decimal == ",":
+        s = s.replace(",", ".")
+    return float(s)
+
+
+def _is_number(cell: str, decimal: str) -> bool:
+    try:
+        _to_float(cell, decimal)
+        return True
+    except ValueError:
+        return False
+
+
+def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | None | bool = False,
+              skip_rows: int = 0) -> TextLayout:
+    """Layout of a text table. ``header``: True, False, or None to detect (a first line of numbers
+    only is data); ``delimiter``: a character, None for whitespace, False to detect."""
+    path = Path(path)
+    if skip_rows < 0:
+        raise _error(f"--skip-rows {skip_rows}: must be 0 or more")
+    try:
+        fh = open(path, "rb")
+    except FileNotFoundError:
+        raise _error(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise _error(f"{path}: is a directory, not a file") from None
+    except OSError as exc:
+        raise _error(f"{path}: cannot be read ({exc.strerror})") from None
+    notes: list[str] = []
+    with fh:
+        probe = fh.read(BINARY_PROBE)
+        if not probe.strip():
+            raise _error(f"{path}: empty file")
+        if b"\x00" in probe:
+            raise _error(f"{path}: not a text file (binary data); expected delimited text (CSV) or Parquet")
+        fh.seek(0)
+        offset = 3 if probe.startswith(b"\xef\xbb\xbf") else 0   # UTF-8 byte-order mark (spreadsheet exports)
+        fh.seek(offset)
+        lineno = 0
+        first: tuple[str, int, int] | None = None   # (text, line, offset) of the first non-blank line
+        second: tuple[str, int, int] | None = None
+        for raw in fh:
+            lineno += 1
+            start, offset = offset, offset + len(raw)
+            if lineno <= skip_rows:
+                continue
+            text = _decode(raw).rstrip("\r\n")
+            if not text.strip():
+                continue
+            if first is None:
+                first = (text, lineno, start)
+            else:
+                second = (text, lineno, start)
+                break
+    if first is None:
+        if skip_rows:
+            raise _error(f"{path}: nothing left after skipping {skip_rows} line(s) (--skip-rows)")
+        raise _error(f"{path}: empty file")
+    if delimiter is False:
+        delimiter = _detect_delimiter(first[0])
+        if delimiter != ",":
+            notes.append(f"delimiter: {_delimiter_name(delimiter)} (detected)")
+    data_text = second[0] if second is not None else first[0]
+    decimal = "."
+    if delimiter != ",":
+        cells = _split(data_text, delimiter)
+        if any(_NUMBER_DECIMAL_COMMA.match(c.strip()) for c in cells) and not any("." in c for c in cells):
+            decimal = ","
+            notes.append("decimal separator: comma (detected)")
+    cells = [c.strip() for c in _split(first[0], delimiter)]
+    if header is None:
+        header = not all(_is_number(c, decimal) for c in cells if c)
+        if not header:
+            notes.append(f"no header row: line {first[1]} holds numbers only, read as data (columns by 0-based index)")
+    if header:
+        names = [c.strip().strip('"') for c in cells]
+        if any(not n for n in names):
+            raise _error(f"{path}: line {first[1]}: empty column name in the header (column {names.index('')})")
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise _error(f"{path}: duplicate column(s) {', '.join(dup)}")
+        if second is None:
+            raise _error(f"{path}: no data rows after the header (line {first[1]})")
+        return TextLayout(path, delimiter, decimal, names, len(names), second[2], second[1], notes)
+    return TextLayout(path, delimiter, decimal, None, len(cells), first[2], first[1], notes)
+
+
+def _detect_delimiter(line: str) -> str | None:
+    """The delimiter of a header or data line: tab, semicolon, comma, bar, else runs of whitespace
+    (';' and tab win over ',' so that decimal commas stay inside their cells)."""
+    for d in ("\t", ";", ",", "|"):
+        if d in line:
+            return d
+    return None if len(line.split()) > 1 else ","
+
+
+def _delimiter_name(d: str | None) -> str:
+    return {None: "whitespace", "\t": "tab", ";": "';'", ",": "','", "|": "'|'"}.get(d, repr(d))
+
+
+def read_columns(layout: TextLayout, indices: list[int], labels: list[str], *, cut_last_line: bool = False) -> TextColumns:
+    """Columns ``indices`` (0-based) as float64 [rows, k]; ``labels`` name them in messages.
+    ``cut_last_line``: a last row with too few values (a logger stopped mid-line) is dropped with a
+    note instead of being an error."""
+    data = _fast(layout, indices)
+    if data is None or not np.isfinite(data).all():
+        return _slow(layout, indices, labels, cut_last_line)
+    if data.shape[0] == 0:
+        raise _error(f"{layout.path}: no data rows")
+    return TextColumns(data, layout)
+
+
+def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
+    """pyarrow (one-character delimiter) or np.loadtxt (whitespace); None if either refuses."""
+    if not indices:
+        return None
+    if layout.delimiter is None:
+        try:
+            with open(layout.path, "rb") as fh:
+                fh.seek(layout.data_offset)
+                out = np.loadtxt(fh, usecols=indices, ndmin=2, comments=None, dtype=float)
+        except (ValueError, IndexError):
+            return None
+        return out
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    names = [f"c{i}" for i in range(layout.n_fields)]
+    wanted = [names[i] for i in indices]
+    try:
+        src = pa.memory_map(str(layout.path))
+        src.seek(layout.data_offset)
+        table = pacsv.read_csv(
+            src,
+            read_options=pacsv.ReadOptions(column_names=names, block_size=1 << 24),
+            parse_options=pacsv.ParseOptions(delimiter=layout.delimiter),
+            convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in wanted},
+                                                 include_columns=wanted, decimal_point=layout.decimal),
+        )
+    except (pa.ArrowException, OSError):
+        return None
+    if any(table.column(n).null_count for n in wanted):
+        return None
+    return np.column_stack([table.column(n).to_numpy() for n in wanted]) if table.num_rows else np.zeros((0, len(wanted)))
+
+
+def _rows(layout: TextLayout):
+    """(line number, cells) of every non-blank data line, from the first data line on."""
+    with open(layout.path, "rb") as fh:
+        fh.seek(layout.data_offset)
+        text = io.TextIOWrapper(fh, encoding="utf-8", errors="replace", newline="")
+        if layout.delimiter is None:
+            for i, line in enumerate(text):
+                cells = line.split()
+                if cells:
+                    yield layout.data_line + i, cells
+            return
+        reader = csv.reader(text, delimiter=layout.delimiter)
+        for cells in reader:
+            if not cells or all(not c.strip() for c in cells):
+                continue
+            yield layout.data_line + reader.line_num - 1, cells
+
+
+def _data_lines(layout: TextLayout) -> np.ndarray:
+    return np.fromiter((ln for ln, _ in _rows(layout)), dtype=np.int64)
+
+
+def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_line: bool) -> TextColumns:
+    """Line by line: the exact column, row and line of the first bad cell."""
+    path, n = layout.path, layout.n_fields
+    cols = [array.array("d") for _ in indices]
+    lines = array.array("q")
+    short: tuple[int, int, int] | None = None        # (row, line, values) of a row with too few values
+    row = 0
+    for line, cells in _rows(layout):
+        if short is not None:   # a short row that is not the last one
+            r, ln, k = short
+            raise _error(f"{path}: row {r} (line {ln}) has {k} values, {layout.first_row_label} has {n}")
+        row += 1
+        if len(cells) != n:
+            if len(cells) < n and cut_last_line:
+                short = (row, line, len(cells))
+                continue
+            raise _error(f"{path}: row {row} (line {line}) has {len(cells)} values, {layout.first_row_label} has {n}")
+        for k, c in enumerate(indices):
+            cell = cells[c]
+            try:
+                v = _to_float(cell, layout.decimal)
+            except ValueError:
+                what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a number"
+                raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}") from None
+            if v != v or v in (float("inf"), float("-inf")):
+                raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {cell.strip()} is not a finite number")
+            cols[k].append(v)
+        lines.append(line)
+    if short is not None:
+        r, ln, k = short
+        layout.notes.append(f"row {r} (line {ln}), the last, has {k} of {n} values (cut short when logging stopped): dropped")
+    if not lines:
+        raise _error(f"{path}: no data rows")
+    data = np.column_stack([np.frombuffer(c, dtype=float) for c in cols]) if cols else np.zeros((len(lines), 0))
+    return TextColumns(data, layout, np.frombuffer(lines, dtype=np.int64))

@@ -1,0 +1,100 @@
+"""The time grid of a measured record: jitter, gaps and repeated timestamps are reported and the real
+grid is kept; time going backwards is an error naming the row.
+
+Repeated timestamps: the later rows of a run of equal timestamps are dropped and the first kept
+(a logger that writes a sample twice, or a clock that did not tick), and the count is reported.
+A gap is an interval longer than ``GAP_FACTOR`` median periods (missing samples); jitter is the
+spread of the other intervals around the median period.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+GAP_FACTOR = 1.5
+JITTER_NOTE_PCT = 0.1     # below this rms jitter (% of the period) the grid is called regular
+
+
+@dataclass
+class TimeGrid:
+    """What the time column looked like (figures in s and % of the median period)."""
+
+    source: str                       # 'column' or 'rate'
+    rows: int                         # rows kept
+    median_period_s: float
+    rate_hz: float
+    duration_s: float
+    jitter_rms_pct: float = 0.0       # rms deviation of the non-gap intervals from the median period
+    jitter_max_pct: float = 0.0       # largest such deviation
+    gaps: int = 0                     # intervals > GAP_FACTOR median periods
+    largest_gap_s: float = 0.0
+    missing_samples: int = 0          # estimated from the gaps
+    repeated: int = 0                 # rows dropped for a repeated timestamp
+    repeated_rows: list[int] = field(default_factory=list)   # first few dropped rows (from 1)
+    start_s: float = 0.0              # first timestamp before the grid was shifted to start at 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def notes(self) -> list[str]:
+        out = []
+        if self.source == "rate":
+            out.append(f"time: no time column; a regular grid at {self.rate_hz:g} Hz (--rate)")
+            return out
+        if self.jitter_rms_pct >= JITTER_NOTE_PCT:
+            out.append(f"time: jitter {self.jitter_rms_pct:.2g} % rms (largest {self.jitter_max_pct:.2g} %) of the "
+                       f"{1e3 * self.median_period_s:.4g} ms median period; the real timestamps are kept")
+        if self.gaps:
+            out.append(f"time: {self.gaps} gap(s) longer than {GAP_FACTOR:g} periods, the largest {self.largest_gap_s:.4g} s "
+                       f"(about {self.missing_samples} missing sample(s) in all); kept as recorded")
+        if self.repeated:
+            rows = ", ".join(str(r) for r in self.repeated_rows) + (", ..." if self.repeated > len(self.repeated_rows) else "")
+            out.append(f"time: {self.repeated} row(s) repeat the previous timestamp and were dropped, the first of "
+                       f"each kept (rows {rows})")
+        if self.start_s:
+            out.append(f"time: starts at {self.start_s:.10g} s in the file; shifted to start at 0")
+        return out
+
+
+def check_grid(t: np.ndarray, *, where: str, label: str, place) -> tuple[TimeGrid, np.ndarray]:
+    """Check a time column (s) in file order. Returns the grid report and the mask of rows to keep.
+    ``place(row)`` names data row ``row`` (from 1) in messages: 'row 12 (line 13)'."""
+    from ..dataset import DatasetError
+
+    if t.size < 2:
+        raise DatasetError(f"{where}column {label}: {t.size} row(s); a record needs at least 2")
+    d = np.diff(t)
+    back = np.flatnonzero(d < 0)
+    if back.size:
+        r = int(back[0]) + 2
+        raise DatasetError(
+            f"{where}column {label}: {place(r)}: time goes backwards, {t[r - 1]:.10g} s after "
+            f"{t[r - 2]:.10g} s in {place(r - 1)}; time must increase"
+        )
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = d > 0
+    dropped = np.flatnonzero(~keep) + 1
+    tk = t[keep]
+    if tk.size < 2:
+        raise DatasetError(f"{where}column {label}: every timestamp is the same ({t[0]:g} s)")
+    dk = np.diff(tk)
+    med = float(np.median(dk))
+    gap = dk > GAP_FACTOR * med
+    regular = dk[~gap]
+    dev = (regular - med) / med * 100.0 if regular.size else np.zeros(1)
+    grid = TimeGrid(
+        source="column", rows=int(tk.size), median_period_s=med, rate_hz=1.0 / med,
+        duration_s=float(tk[-1] - tk[0]),
+        jitter_rms_pct=float(np.sqrt(np.mean(dev ** 2))), jitter_max_pct=float(np.max(np.abs(dev))),
+        gaps=int(gap.sum()), largest_gap_s=float(dk[gap].max()) if gap.any() else 0.0,
+        missing_samples=int(np.sum(np.rint(dk[gap] / med) - 1)) if gap.any() else 0,
+        repeated=int(dropped.size), repeated_rows=[int(r) for r in dropped[:5]], start_s=float(tk[0]),
+    )
+    return grid, keep
+
+
+def regular_grid(rows: int, rate: float) -> TimeGrid:
+    period = 1.0 / rate
+    return TimeGrid(source="rate", rows=rows, median_period_s=period, rate_hz=rate, duration_s=(rows - 1) * period)
