@@ -18,12 +18,15 @@ def c_identifier(name: str) -> str:
     return "_" + ident if ident[0].isdigit() else ident
 
 
+class _Printer(C99CodePrinter):
+    """Floats as the shortest literal that reads back as the same double (``repr``)."""
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+
 def _body(block: Block, inputs: list[tuple[str, list[sp.Symbol]]], printer: C99CodePrinter) -> list[str]:
-    used = set()
-    for _, e in block.assignments:
-        used |= e.free_symbols
-    for e in block.outputs:
-        used |= e.free_symbols
+    used = block.symbols_used()
     lines = []
     for arg, syms in inputs:
         for k, s in enumerate(syms):
@@ -39,7 +42,7 @@ def c_source(eom: EquationsOfMotion, source: str, prefix: str | None = None) -> 
     ``<prefix>_inverse_dynamics`` (``prefix``: the robot name made an identifier)."""
     n = eom.n
     p = c_identifier(prefix or eom.name)
-    pr = C99CodePrinter()
+    pr = _Printer()
     doc = header_lines(eom, source) + [
         "",
         "Functions (arrays of doubles, matrices row-major; outputs may not alias inputs):",

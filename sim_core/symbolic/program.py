@@ -57,6 +57,15 @@ class Block:
     assignments: list[tuple[sp.Symbol, sp.Expr]]
     outputs: list[sp.Expr]
 
+    def symbols_used(self) -> set[sp.Symbol]:
+        """Every symbol read by an assignment or an output (inputs among them)."""
+        used: set[sp.Symbol] = set()
+        for _, e in self.assignments:
+            used |= e.free_symbols
+        for e in self.outputs:
+            used |= e.free_symbols
+        return used
+
     def operation_count(self) -> int:
         """Arithmetic operations and function calls to evaluate the block (sympy.count_ops)."""
         return int(sum(sp.count_ops(e) for _, e in self.assignments) + sum(sp.count_ops(e) for e in self.outputs))

@@ -10,12 +10,15 @@ from .header import header_lines
 from .program import Block
 
 
+class _Printer(PythonCodePrinter):
+    """Floats as the shortest literal that reads back as the same double (``repr``)."""
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+
 def _body(block: Block, inputs: list[tuple[str, list[sp.Symbol]]], printer: PythonCodePrinter) -> list[str]:
-    used = set()
-    for s, e in block.assignments:
-        used |= e.free_symbols
-    for e in block.outputs:
-        used |= e.free_symbols
+    used = block.symbols_used()
     lines = []
     for arg, syms in inputs:
         lines.append(f"    _check(len({arg}) == {len(syms)}, {arg!r})")
@@ -31,7 +34,7 @@ def python_source(eom: EquationsOfMotion, source: str) -> str:
     """Module text with ``mass_matrix(q)``, ``coriolis(q, qd)``, ``gravity(q)`` and
     ``inverse_dynamics(q, qd, qdd)``, returning numpy arrays."""
     n = eom.n
-    pr = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
+    pr = _Printer({"fully_qualified_modules": True, "standard": "python3"})
     doc = "\n".join(header_lines(eom, source))
     out = [f'"""{doc}\n"""', "", "import math", "", "import numpy as np", "",
            f"NAME = {eom.name!r}",
