@@ -229,3 +229,26 @@ def test_bulk_modulus(arm):
     factor = np.mean([0.3 / (1 + 1e6 / (p + ctx.GP[L.GP_P_ATM])) for p in (pa, pb)])
     assert abs(sags[0]) > 1e-4
     assert sags[1] / sags[0] == pytest.approx(1.0 / factor, rel=0.1)
+
+
+def test_stribeck_friction(arm):
+    """Friction holds up to the static level until the joint breaks free, then falls to Coulomb's."""
+    ts, tc, vs = 300.0, 100.0, 0.01
+    eff = [("stribeck_friction", "j2", {"static_torque": ts, "coulomb_torque": tc, "stribeck_velocity": vs})]
+    ramp = lambda t: np.clip((t - 0.2) * 2.0, 0.0, 4.0)   # the valve opens slowly: pressure builds up first
+    t, q, tr, ctx = run_joint(arm, "j2", ramp, effects=eff)
+    _, qn, trn, _ = run_joint(arm, "j2", ramp)
+    a = arm.joint_names.index("j2")
+    AP = ctx.AP
+
+    def force(traj):
+        pa, pb = traj.pressure("j2", "a"), traj.pressure("j2", "b")
+        arm_len = np.array([cylinder_length(x, AP[a, L.AP_LK_C0], AP[a, L.AP_LK_D1], AP[a, L.AP_LK_D2])[1]
+                            for x in traj.q[:, 1]])
+        return (pa * AP[a, L.AP_AREA_A] - pb * AP[a, L.AP_AREA_B]) * arm_len
+
+    extra = force(tr) - force(trn)
+    free = np.argmax(tr.qd[:, 1] > vs)                      # the joint breaks free
+    assert 0.8 * ts < extra[:free].max() < 1.05 * ts        # held by up to the static friction
+    assert np.mean(extra[2500:2800]) == pytest.approx(tc, rel=0.05)   # sliding fast: the Coulomb level
+    assert np.mean(tr.qd[2500:2800, 1]) > 10 * vs

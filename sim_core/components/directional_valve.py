@@ -124,14 +124,26 @@ def edge_conductances(a, s, kvn, AP):
 @njit(inline="always")
 def edge_flows(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
     """Flows of the four metering edges for port pressures ``ua``, ``ub`` and their slopes with
-    respect to the port pressure (P->A, A->T, P->B, B->T)."""
+    respect to the port pressure (P->A, A->T, P->B, B->T). Closed edges pass nothing: a spool
+    travelling one way leaves the other pair shut (unless the valve leaks at null)."""
     tr = AP[a, DP_TR]
-    f_pa, d_pa = orifice(p_s - ua, tr)
-    f_at, d_at = orifice(ua - p_t, tr)
-    f_pb, d_pb = orifice(p_s - ub, tr)
-    f_bt, d_bt = orifice(ub - p_t, tr)
-    return (g_pa * f_pa, g_pb * f_at, g_pb * f_pb, g_pa * f_bt,
-            -g_pa * d_pa, g_pb * d_at, -g_pb * d_pb, g_pa * d_bt)
+    q_pa = q_bt = dq_pa = dq_bt = 0.0
+    q_pb = q_at = dq_pb = dq_at = 0.0
+    if g_pa != 0.0:
+        f_pa, d_pa = orifice(p_s - ua, tr)
+        f_bt, d_bt = orifice(ub - p_t, tr)
+        q_pa = g_pa * f_pa
+        q_bt = g_pa * f_bt
+        dq_pa = -g_pa * d_pa
+        dq_bt = g_pa * d_bt
+    if g_pb != 0.0:
+        f_at, d_at = orifice(ua - p_t, tr)
+        f_pb, d_pb = orifice(p_s - ub, tr)
+        q_at = g_pb * f_at
+        q_pb = g_pb * f_pb
+        dq_at = g_pb * d_at
+        dq_pb = -g_pb * d_pb
+    return q_pa, q_at, q_pb, q_bt, dq_pa, dq_at, dq_pb, dq_bt
 
 
 @njit(inline="always")

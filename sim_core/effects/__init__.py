@@ -1,7 +1,9 @@
 """The effect bank: every physical effect is a switchable submodel with named parameters.
 
 Effects are off unless a robot's spec, a parameter file or a command switches them on. The
-catalog (``hydrohil effects --json``) is generated from these classes.
+catalog (``hydrohil effects --json``) is generated from these classes. Adding an effect: its file
+(see ``base.Effect``) and one entry below; the kernel, the reference solver, the energy check and the
+diagnosis pick it up from there.
 """
 
 from .area_ratio import AreaRatio
@@ -20,6 +22,7 @@ from .payload import Payload
 from .sensor_gain import SensorGain
 from .sensor_offset import SensorOffset
 from .spool_lag import SpoolLag
+from .stribeck_friction import StribeckFriction
 from .valve_asymmetry import ValveAsymmetry
 
 EFFECTS: dict[str, type[Effect]] = {
@@ -27,7 +30,7 @@ EFFECTS: dict[str, type[Effect]] = {
     for e in (
         Deadband, ValveAsymmetry, SpoolLag, Delay, Leakage, CoulombFriction, Backlash, AreaRatio,
         FlowSaturation, LineDynamics, JointCompliance, Payload, SensorOffset, SensorGain, Hysteresis,
-        BulkModulus,
+        BulkModulus, StribeckFriction,
     )
 }
 

@@ -209,12 +209,17 @@ def _prune(root: Path, keep: Path) -> None:
 
 
 _MODULE = None
+_MODULE_SIG = None
 
 
 def kernel():
-    """The compiled kernel module for the current components, effects and layout (built once)."""
-    global _MODULE
-    if _MODULE is not None:
+    """The compiled kernel module for the current components, effects and layout (built once per
+    set of registered effects and layout)."""
+    global _MODULE, _MODULE_SIG
+    from ..effects import EFFECTS
+
+    sig = (tuple(EFFECTS), layout.fingerprint())
+    if _MODULE is not None and sig == _MODULE_SIG:
         return _MODULE
     text = generate()
     key = source_key(text)
@@ -230,5 +235,5 @@ def kernel():
     mod = importlib.util.module_from_spec(spec)
     sys.modules[name] = mod
     spec.loader.exec_module(mod)
-    _MODULE = mod
+    _MODULE, _MODULE_SIG = mod, sig
     return mod
