@@ -152,26 +152,34 @@ def write_csv(path: str | Path, columns: dict[str, np.ndarray]) -> None:
 
 
 def round_significant(x: np.ndarray, digits: int) -> np.ndarray:
-    """``x`` rounded to ``digits`` significant decimal digits, so that the shortest text of each value
-    (what the CSV writer prints) has at most that many digits, like ``%.{digits}g``."""
+    """``x`` rounded to ``digits`` significant decimal digits, value for value what ``%.{digits}g``
+    prints, so that the shortest text of each value (what the CSV writer prints) has at most that
+    many digits. Vectorised; values near a rounding tie, and those beyond the range where powers of
+    ten are exact doubles, are formatted one by one."""
     x = np.asarray(x, dtype=float)
-    out = x.copy()
     nz = np.isfinite(x) & (x != 0.0)
-    if not nz.any():
-        return out
-    v = x[nz]
-    k = (digits - 1) - np.floor(np.log10(np.abs(v))).astype(np.int64)
-    r = np.empty_like(v)
-    pos = (k >= 0) & (k <= 22)       # powers of ten up to 1e22 are exact doubles
-    p = 10.0 ** k[pos]
-    r[pos] = np.round(v[pos] * p) / p
-    neg = (k < 0) & (k >= -22)
-    q = 10.0 ** (-k[neg])
-    r[neg] = np.round(v[neg] / q) * q
-    rest = ~(pos | neg)              # below 1e-13 or above 1e31: rare, formatted one by one
-    r[rest] = [float(f"{a:.{digits}g}") for a in v[rest]]
-    out[nz] = r
-    return out
+    v = np.where(nz, x, 1.0)
+    with np.errstate(over="ignore", under="ignore"):
+        k = (digits - 1) - np.floor(np.log10(np.abs(v)))
+        up = k >= 0
+        p = 10.0 ** np.clip(np.abs(k), 0, 22)
+        scaled = np.where(up, v * p, v / p)
+        rs = np.round(scaled)
+        r = np.where(up, rs / p, rs * p)
+    # |scaled| < 10**digits: a few ulps around .5 may be a tie the scaling moved; |k| > 22: inexact powers
+    slow = np.flatnonzero(nz & ((np.abs(np.abs(scaled - np.trunc(scaled)) - 0.5) < 1e-5) | (np.abs(k) > 22)))
+    r[slow] = [float(f"{a:.{digits}g}") for a in x[slow]]
+    return np.where(nz, r, x)
+
+
+def check_command_range(u: np.ndarray, joint, *, where: str, label: str, place, hint: str = "") -> None:
+    """Commands (V) of ``joint`` (a JointSpec) inside its command range; ``place(row)`` names a row."""
+    lo, hi = joint.command_range
+    bad = np.flatnonzero((u < lo) | (u > hi))
+    if bad.size:
+        r = int(bad[0]) + 1
+        raise DatasetError(f"{where}column {label}: {place(r)}: {u[r - 1]:g} V is outside the joint's command range "
+                           f"[{lo:g}, {hi:g}] V{hint}")
 
 
 def input_matrix(ds: Dataset, spec, where: str = "") -> np.ndarray:
@@ -190,14 +198,7 @@ def input_matrix(ds: Dataset, spec, where: str = "") -> np.ndarray:
             if j not in joints:
                 raise DatasetError(f"{where}column {name!r}: unknown joint {j!r}; joints of {spec.name}: {', '.join(joints)}")
             col = ds.data[:, c]
-            lo, hi = spec.joint(j).command_range
-            bad = np.flatnonzero((col < lo) | (col > hi))
-            if bad.size:
-                r = int(bad[0]) + 1
-                raise DatasetError(
-                    f"{where}column {name!r}: row {r} (line {r + 1}): {col[r - 1]:g} V is outside the joint's "
-                    f"command range [{lo:g}, {hi:g}] V"
-                )
+            check_command_range(col, spec.joint(j), where=where, label=repr(name), place=lambda r: f"row {r} (line {r + 1})")
             U[:, joints.index(j)] = col
         elif name not in allowed_other:
             raise DatasetError(

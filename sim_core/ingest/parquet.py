@@ -25,7 +25,7 @@ def _error(msg: str) -> Exception:
 
 
 def write_parquet(path: str | Path, columns: dict[str, np.ndarray], *, units: dict[str, str] | None = None,
-                  robot: str | None = None, compression: str = "zstd") -> None:
+                  robot: str | None = None, compression: str = "snappy") -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 

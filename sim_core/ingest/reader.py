@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import Dataset, DatasetError, check_time, read_dataset
+from ..dataset import Dataset, DatasetError, check_command_range, check_time, read_dataset
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
@@ -125,7 +125,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
     if options.rate is not None and not (np.isfinite(options.rate) and options.rate > 0):
         raise DatasetError(f"--rate {options.rate:g}: must be a positive number of samples per second (Hz)")
     source = _open_source(path, options)
-    notes = list(source.notes)
+    notes = source.notes          # the source adds to it while reading (a cut last line)
     maps = maps + source.implicit_maps(maps, spec, notes)
     if not maps:
         raise DatasetError(f"{where}no column maps to the dataset of {spec.name}: map them with --column NAME=SOURCE[:UNIT] "
@@ -138,7 +138,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
         raise DatasetError(f"{where}no time column: map one with --column time=SOURCE[:s|ms], or give the sample rate "
                            f"with --rate HZ")
     units = [_unit(m, spec, source) for m in maps]
-    raw, place = source.read([m.source for m in maps], [m.source_label for m in maps])
+    raw, place = source.read([m.source for m in maps], [f"{m.name} ({m.source_label})" for m in maps])
     rows = raw.shape[0]
 
     # time grid first: it decides which rows stay
@@ -177,7 +177,8 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
                 valid[m.name] = ~mask[keep]
         v = u.convert(raw[:, i])
         if kind == "command":
-            _check_command(v, m, spec.joint(joint), where, place)
+            check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({m.source_label})", place=place,
+                                hint=f"; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)")
         if kind in ("angle", "position") and joint is not None:
             _note_outside_range(v, m, u, spec, joint, notes)
         v = v[keep]
@@ -207,17 +208,6 @@ def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
         return parse_unit(text, kind, column=m.name, sensor=sensor)
     except ValueError as exc:
         raise DatasetError(f"--column {m.text!r}: {exc}") from None
-
-
-def _check_command(v: np.ndarray, m: ColumnMap, js, where: str, place) -> None:
-    lo, hi = js.command_range
-    bad = np.flatnonzero((v < lo) | (v > hi))
-    if bad.size:
-        r = int(bad[0]) + 1
-        raise DatasetError(
-            f"{where}column {m.name} ({m.source_label}): {place(r)}: {v[r - 1]:g} V is outside the "
-            f"joint's command range [{lo:g}, {hi:g}] V; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)"
-        )
 
 
 def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[str]) -> None:

@@ -223,15 +223,15 @@ def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
     names = [f"c{i}" for i in range(layout.n_fields)]
     wanted = [names[i] for i in indices]
     try:
-        src = pa.memory_map(str(layout.path))
-        src.seek(layout.data_offset)
-        table = pacsv.read_csv(
-            src,
-            read_options=pacsv.ReadOptions(column_names=names, block_size=1 << 24),
-            parse_options=pacsv.ParseOptions(delimiter=layout.delimiter),
-            convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in wanted},
-                                                 include_columns=wanted, decimal_point=layout.decimal),
-        )
+        with pa.memory_map(str(layout.path)) as src:
+            src.seek(layout.data_offset)
+            table = pacsv.read_csv(
+                src,
+                read_options=pacsv.ReadOptions(column_names=names),
+                parse_options=pacsv.ParseOptions(delimiter=layout.delimiter),
+                convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in wanted},
+                                                     include_columns=wanted, decimal_point=layout.decimal),
+            )
     except (pa.ArrowException, OSError):
         return None
     if any(table.column(n).null_count for n in wanted):
