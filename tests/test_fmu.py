@@ -237,6 +237,66 @@ def test_fmu_without_hydrohil_says_what_is_missing(tmp_path):
     assert "Failed to instantiate" in proc.stderr
 
 
+def _libpython() -> Path | None:
+    name = sysconfig.get_config_var("INSTSONAME") or sysconfig.get_config_var("LDLIBRARY") or ""
+    lib = Path(sysconfig.get_config_var("LIBDIR") or "") / name
+    return lib if name.endswith(tuple(".so" + s for s in ("", ".1", ".1.0"))) and lib.is_file() else None
+
+
+def test_fmu_runs_in_a_c_master_without_python(tmp_path):
+    """A C program that drives the FMU through the FMI 2.0 C API, as Simulink and OMSimulator do,
+    gets the Simulator's numbers; its process has no Python until the FMU brings libpython
+    (LD_PRELOAD, as the README tells Linux users of such tools)."""
+    import platform
+    import shutil
+
+    from sim_core.export.fmu_build import build_fmu
+    from sim_core.plant import Plant
+    from sim_core.simulator import Simulator
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if sys.platform != "linux" or platform.machine() != "x86_64":
+        pytest.skip("pythonfmu ships linux64 and win64 binaries; this test drives the linux64 one")
+    if cc is None:
+        pytest.skip("no C compiler (cc/gcc) to build the C master")
+    lib = _libpython()
+    if lib is None:
+        pytest.skip(f"this Python has no shared libpython (Py_ENABLE_SHARED={sysconfig.get_config_var('Py_ENABLE_SHARED')})")
+    headers = Path(fmpy.__file__).parent / "c-code"
+    master = tmp_path / "fmu_c_master"
+    subprocess.run([cc, "-O1", "-o", str(master), str(Path(__file__).parent / "fmu_c_master.c"), f"-I{headers}", "-ldl"],
+                   check=True, capture_output=True, timeout=120)
+
+    spec = load_robot("harvester")
+    fmu = build_fmu(spec, tmp_path / "h.fmu")
+    unzipped = tmp_path / "unzipped"
+    zipfile.ZipFile(fmu).extractall(unzipped)
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outs = ["q_boom", "p_boom_a", "qd_boom", "q_stick"]
+    steps, dt, u = 150, 0.01, 6.0
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    env["LD_PRELOAD"] = str(lib)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).resolve().parent.parent), sysconfig.get_paths()["purelib"],
+                                         sysconfig.get_paths()["platlib"]])
+    proc = subprocess.run([str(master), str(unzipped), md.coSimulation.modelIdentifier, md.guid, str(steps), repr(dt),
+                           f"{vr['u_boom']}={u}", ",".join(str(vr[n]) for n in outs)],
+                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = np.array([[float(x) for x in line.split(",")] for line in proc.stdout.split()])
+    assert got.shape == (steps + 1, 1 + len(outs))
+
+    U = np.zeros((steps + 1, len(spec.joint_names)))
+    U[:, spec.joint_names.index("boom")] = u
+    traj = Simulator(Plant(spec).create_context(seed=0)).run(np.arange(steps + 1) * dt, U)
+    ref = {"q_boom": traj.angle("boom"), "p_boom_a": traj.pressure("boom", "a"), "q_stick": traj.angle("stick"),
+           "qd_boom": traj.qd[:, spec.tree.index(spec.joint("boom").dof)]}
+    for i, n in enumerate(outs):
+        scale = max(1.0, float(np.max(np.abs(ref[n]))))
+        assert np.max(np.abs(got[:, 1 + i] - ref[n])) <= 1e-9 * scale, n
+    assert np.ptp(ref["q_boom"]) > 0.05
+
+
 @pytest.mark.parametrize("robot", available_robots())
 def test_model_description_is_the_robots_interface(robot, tmp_path):
     """Inputs, outputs and every float parameter of the spec, with units and exact start values."""
