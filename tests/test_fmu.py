@@ -21,18 +21,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-fmpy = pytest.importorskip("fmpy")
-pytest.importorskip("pythonfmu")
+import fmpy  # the test extra installs fmpy and pythonfmu: a missing one fails here, never skips
+import pythonfmu  # noqa: F401
+from fmpy import read_model_description, simulate_fmu
+from fmpy.validation import validate_fmu
 
-from fmpy import read_model_description, simulate_fmu  # noqa: E402
-from fmpy.validation import validate_fmu  # noqa: E402
-
-from sim_core.dataset import read_csv  # noqa: E402
-from sim_core.export.fmi_names import FmiNameError, part, path_name  # noqa: E402
-from sim_core.export.fmu_variables import interface, parameter_entries  # noqa: E402
-from sim_core.export.robot_snapshot import write_snapshot  # noqa: E402
-from sim_core.export.units import fmi_unit, for_joint_type  # noqa: E402
-from sim_core.model.spec import available_robots, load_robot  # noqa: E402
+from sim_core.dataset import read_csv
+from sim_core.export.fmi_names import FmiNameError, part, path_name
+from sim_core.export.fmu_variables import interface, parameter_entries
+from sim_core.export.robot_snapshot import write_snapshot
+from sim_core.export.units import fmi_unit, for_joint_type
+from sim_core.model.spec import available_robots, load_robot
 
 RATE = 200.0      # Hz: the input grid and the communication step
 DURATION = 4.0    # s
