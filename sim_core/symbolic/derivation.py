@@ -91,18 +91,13 @@ class _Joint:
             self.rot = [[prog.let(sp.expand(e)) for e in row] for row in rot]
             self.r = p
 
-    def _mv(self, A, v, transpose=False):
-        if transpose:
-            return [self.prog.let(sum(A[m][k] * v[m] for m in range(3))) for k in range(3)]
-        return [self.prog.let(sum(A[k][m] * v[m] for m in range(3))) for k in range(3)]
-
     def to_child(self, v):
-        u = self._mv(self.R, v, transpose=True)
-        return u if self.rot is None else self._mv(self.rot, u, transpose=True)
+        u = _matvec(self.prog, self.R, v, transpose=True)
+        return u if self.rot is None else _matvec(self.prog, self.rot, u, transpose=True)
 
     def to_parent(self, v):
-        u = v if self.rot is None else self._mv(self.rot, v)
-        return self._mv(self.R, u)
+        u = v if self.rot is None else _matvec(self.prog, self.rot, v)
+        return _matvec(self.prog, self.R, u)
 
 
 def _cross(prog: Program, a, b):
@@ -121,7 +116,10 @@ def _dot(prog: Program, a, b):
     return prog.let(sum(a[k] * b[k] for k in range(3)))
 
 
-def _matvec(prog: Program, A, v):
+def _matvec(prog: Program, A, v, transpose=False):
+    """``A v`` (or ``A^T v``) for a 3x3 ``A`` given as rows."""
+    if transpose:
+        return [prog.let(sum(A[m][k] * v[m] for m in range(3))) for k in range(3)]
     return [prog.let(sum(A[k][m] * v[m] for m in range(3))) for k in range(3)]
 
 
