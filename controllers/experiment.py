@@ -11,19 +11,20 @@ from pathlib import Path
 
 import numpy as np
 
+from hil_server.launcher import ServerProcess
+
 from .plant_local import LocalPlant, configured_spec
 from .scenarios import ANALYSE, SCENARIOS, make_controller
-from .server import EmulatorProcess
 from .tracking import run_loop
 
 
 def write_params(scenario, out: Path) -> Path | None:
     if not scenario.params:
         return None
-    import tomli_w
+    from sim_core.params_file import write_params as write_params_file
 
     path = out / f"{scenario.name}_params.toml"
-    path.write_bytes(tomli_w.dumps(scenario.params).encode())
+    write_params_file(path, scenario.params)
     return path
 
 
@@ -39,9 +40,10 @@ def run_emulated(scenario, out: Path, mode: str, duration: float, params: Path |
     feedback = scenario.control_rate_hz if mode == "realtime" else 100.0
     (out / "traces").mkdir(parents=True, exist_ok=True)
     trace_path = out / "traces" / f"{scenario.name}_{variant or 'emulated'}_{mode}.npz"
-    with EmulatorProcess(scenario.robot, mode=mode, rate_hz=scenario.plant_rate_hz, feedback_rate_hz=feedback,
-                         params=params, workdir=out / "serve") as emu:
-        emu.reset(scenario.seed)
+    args = ["--mode", mode, "--rate", f"{scenario.plant_rate_hz:g}", "--feedback-rate", f"{feedback:g}",
+            "--log-level", "warning"] + (["--params", str(params)] if params else [])
+    with ServerProcess(*args, robot=scenario.robot, can="socketcand", workdir=out / "serve") as emu:
+        emu.rest.reset(scenario.seed)
         cmd = [sys.executable, "-m", "controllers.client", "--scenario", scenario.name, "--robot", scenario.robot,
                "--port", str(emu.can_port), "--mode", mode, "--duration", f"{duration:g}",
                "--tick", f"{1.0 / scenario.plant_rate_hz:.17g}", "--ticks", str(scenario.ticks),
@@ -55,7 +57,7 @@ def run_emulated(scenario, out: Path, mode: str, duration: float, params: Path |
         if proc.returncode != 0:
             raise RuntimeError(f"controller process failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
         summary = json.loads(proc.stdout.strip().splitlines()[-1])
-        loop = emu.state().get("loop", {})
+        loop = emu.rest.state().get("loop", {})
         summary["emulator_loop"] = {k: loop.get(k) for k in ("ticks", "overruns", "resyncs", "watchdog_trips",
                                                               "lateness_us", "realtime_priority")}
     trace = load_trace(trace_path)

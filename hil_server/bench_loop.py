@@ -72,12 +72,12 @@ port, dbc, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
 db = cantools.database.load_file(dbc)
 cmd = db.get_message_by_name("ValveCommand_j2")
 bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="vcan0", tcp_tune=True)
-frames = [can.Message(arbitration_id=cmd.frame_id, data=cmd.encode({"voltage": v, "counter": 0}), is_extended_id=False)
-          for v in (2.0, -2.0)]
 sent = rx = 0
 start = time.perf_counter()
 while time.perf_counter() - start < seconds:
-    bus.send(frames[(sent // 500) % 2])
+    v = 2.0 if (sent // 500) % 2 == 0 else -2.0   # the alive counter steps with every frame
+    bus.send(can.Message(arbitration_id=cmd.frame_id, data=cmd.encode({"voltage": v, "counter": sent & 0xFF}),
+                         is_extended_id=False))
     sent += 1
     nxt = start + sent / 1000.0
     while True:

@@ -55,6 +55,3 @@ class ChannelMap:
         for ch in sorted(self.channels.values(), key=lambda c: (c.module, c.channel)):
             out.setdefault(ch.module, []).append(ch)
         return out
-
-    def of_joint(self, joint: str) -> list[Channel]:
-        return [c for c in self.channels.values() if c.joint == joint]

@@ -114,13 +114,13 @@ def assert_arm_moves(m: Monitor, joint: str, volts: float, seconds: float) -> fl
     dof = m.scene.spec.joint(joint).dof
     before = m.shot("before_command")
     region = m.arm_region()
-    q0 = m.server.svc.state()["pose"][dof]
+    q0 = m.server.svc.documents.state()["pose"][dof]
     with httpx.Client(base_url=m.server.url, timeout=10) as c:
         c.put("/api/v1/commands", json={"voltages": {joint: volts}}).raise_for_status()
         time.sleep(seconds)
         c.put("/api/v1/commands", json={"voltages": {joint: 0.0}}).raise_for_status()
-    wait_for(lambda: abs(m.server.svc.state()["joints"][joint]["velocity"]) < 0.01, 10, f"{joint} to stop")
-    q1 = m.server.svc.state()["pose"][dof]
+    wait_for(lambda: abs(m.server.svc.documents.state()["joints"][joint]["velocity"]) < 0.01, 10, f"{joint} to stop")
+    q1 = m.server.svc.documents.state()["pose"][dof]
     after = m.shot("after_command")
     region = (region | m.arm_region()) & m.canvas
     moved = changed(before, after)[region].mean()
@@ -152,13 +152,13 @@ def test_slider_in_the_page_commands_the_plant(hydrolek):
     s.focus()
     for _ in range(20):  # 20 steps of 0.05 V
         m.page.keyboard.press("ArrowRight")
-    wait_for(lambda: svc.state()["joints"]["j2"]["requested_voltage"] == pytest.approx(1.0), 15,
+    wait_for(lambda: svc.documents.state()["joints"]["j2"]["requested_voltage"] == pytest.approx(1.0), 15,
              "the plant to receive the slider's command")
-    js = svc.state()["joints"]["j2"]
+    js = svc.documents.state()["joints"]["j2"]
     assert js["source"] == "viewer" and js["command_voltage"] == pytest.approx(1.0)
     assert float(s.get_attribute("aria-valuenow")) == pytest.approx(1.0)
     m.page.get_by_role("button", name="Neutral j2", exact=True).click()
-    wait_for(lambda: svc.state()["joints"]["j2"]["requested_voltage"] == 0.0, 15, "neutral on j2")
+    wait_for(lambda: svc.documents.state()["joints"]["j2"]["requested_voltage"] == 0.0, 15, "neutral on j2")
     wait_for(lambda: float(s.get_attribute("aria-valuenow")) == 0.0, 15, "the slider back at 0 V")
 
 
@@ -172,17 +172,17 @@ def test_estop_in_the_page_neutralises_every_valve(hydrolek):
     s.focus()
     for _ in range(8):
         m.page.keyboard.press("ArrowLeft")
-    wait_for(lambda: svc.state()["joints"]["j4"]["requested_voltage"] == pytest.approx(-0.4), 15,
+    wait_for(lambda: svc.documents.state()["joints"]["j4"]["requested_voltage"] == pytest.approx(-0.4), 15,
              "the j4 slider command")
-    assert all(js["command_voltage"] != 0.0 for js in svc.state()["joints"].values())
+    assert all(js["command_voltage"] != 0.0 for js in svc.documents.state()["joints"].values())
     m.page.get_by_role("button", name="E-STOP", exact=True).click()
-    wait_for(lambda: svc.estopped, 15, "the E-STOP to engage")
+    wait_for(lambda: svc.commands.estopped, 15, "the E-STOP to engage")
     try:
-        st = svc.state()
+        st = svc.documents.state()
         assert st["estop"]
         wait_for(lambda: all(js["command_voltage"] == 0.0 and js["requested_voltage"] == 0.0
-                             for js in svc.state()["joints"].values()), 5, "every valve at 0 V")
-        wait_for(lambda: all(abs(js["spool"]) < 1e-3 for js in svc.state()["joints"].values()), 5,
+                             for js in svc.documents.state()["joints"].values()), 5, "every valve at 0 V")
+        wait_for(lambda: all(abs(js["spool"]) < 1e-3 for js in svc.documents.state()["joints"].values()), 5,
                  "every spool centred")
         m.page.wait_for_selector("text=E-STOP ENGAGED", timeout=15000)
         wait_for(lambda: s.get_attribute("aria-disabled") == "true", 15, "the sliders to lock")
@@ -191,10 +191,10 @@ def test_estop_in_the_page_neutralises_every_valve(hydrolek):
         s.focus()
         m.page.keyboard.press("ArrowRight")
         m.page.wait_for_timeout(1000)
-        assert svc.state()["joints"]["j4"]["requested_voltage"] == 0.0
+        assert svc.documents.state()["joints"]["j4"]["requested_voltage"] == 0.0
     finally:
         m.page.get_by_role("button", name="Release E-STOP", exact=True).click()
-        wait_for(lambda: not svc.estopped, 15, "the E-STOP release")
+        wait_for(lambda: not svc.commands.estopped, 15, "the E-STOP release")
     wait_for(lambda: s.get_attribute("aria-disabled") == "false", 15, "the sliders to unlock")
 
 
@@ -243,9 +243,9 @@ def test_closing_the_last_page_puts_its_joints_to_neutral(hydrolek):
     s.focus()
     for _ in range(10):
         m.page.keyboard.press("ArrowRight")
-    wait_for(lambda: svc.state()["joints"]["j5"]["requested_voltage"] == pytest.approx(0.5), 15, "the j5 command")
+    wait_for(lambda: svc.documents.state()["joints"]["j5"]["requested_voltage"] == pytest.approx(0.5), 15, "the j5 command")
     m.page.close()
-    wait_for(lambda: svc.state()["joints"]["j5"]["requested_voltage"] == 0.0, 15, "the dead-man neutral on j5")
+    wait_for(lambda: svc.documents.state()["joints"]["j5"]["requested_voltage"] == 0.0, 15, "the dead-man neutral on j5")
 
 
 @pytest.mark.parametrize("robot, joint, volts, seconds", [("mars_nd", "left_j2", 6.0, 1.2),

@@ -71,13 +71,13 @@ def test_virtual_bus_commands_feedback_and_watchdog(virtual_service, bus):
     cmd = db.get_message_by_name("ValveCommand_j2")
     fb = db.get_message_by_name("JointFeedback_j2")
     emcy = db.get_message_by_name("Emergency")
-    a0 = svc.state()["joints"]["j2"]["angle"]
+    a0 = svc.documents.state()["joints"]["j2"]["angle"]
     frames = []
     for k in range(50):   # 0.5 s of commands at 100 Hz
         bus.send(can.Message(arbitration_id=cmd.frame_id, data=cmd.encode({"voltage": 4.0, "counter": k}),
                              is_extended_id=False))
         frames += collect(bus, 0.01)
-    st = svc.state()["joints"]["j2"]
+    st = svc.documents.state()["joints"]["j2"]
     assert st["command_voltage"] == 4.0 and st["source"] == "can" and not st["watchdog"]
     assert st["angle"] > a0 + 0.02
     fbs = [fb.decode(m.data) for m in frames if m.arbitration_id == fb.frame_id]
@@ -85,7 +85,7 @@ def test_virtual_bus_commands_feedback_and_watchdog(virtual_service, bus):
     assert len({f["counter"] for f in fbs}) == len(fbs)          # rolling counter
     # silence: the watchdog puts the valve neutral within 100 ms and says why
     frames = collect(bus, 0.4)
-    st = svc.state()["joints"]["j2"]
+    st = svc.documents.state()["joints"]["j2"]
     assert st["watchdog"] and st["command_voltage"] == 0.0 and st["requested_voltage"] == 4.0
     em = [emcy.decode(m.data) for m in frames if m.arbitration_id == emcy.frame_id]
     assert any(e["error_code"] == D.EMCY_TIMEOUT and e["joint"] == 1 and e["fmi"] == D.FMI_TIMEOUT for e in em)
@@ -95,11 +95,11 @@ def test_virtual_bus_commands_feedback_and_watchdog(virtual_service, bus):
     # the next command recovers
     bus.send(can.Message(arbitration_id=cmd.frame_id, data=cmd.encode({"voltage": -2.0, "counter": 1}), is_extended_id=False))
     frames = collect(bus, 0.05)
-    st = svc.state()["joints"]["j2"]
+    st = svc.documents.state()["joints"]["j2"]
     assert not st["watchdog"] and st["command_voltage"] == -2.0
     em = [emcy.decode(m.data) for m in frames + collect(bus, 0.05) if m.arbitration_id == emcy.frame_id]
     assert any(e["error_code"] == D.EMCY_RESET and e["joint"] == 1 for e in em)
-    assert svc.loop_stats()["watchdog_trips"] >= 1
+    assert svc.documents.loop_stats()["watchdog_trips"] >= 1
 
 
 def test_bad_frames_are_counted_and_ignored_while_the_loop_keeps_its_rate(virtual_service, bus):
@@ -107,7 +107,7 @@ def test_bad_frames_are_counted_and_ignored_while_the_loop_keeps_its_rate(virtua
     db = cantools.database.load_file(str(D.dbc_path("hydrolek")))
     cmd = db.get_message_by_name("ValveCommand_j3")
     before = dict(svc.bridge.counters)
-    u0 = svc.command_voltages()["j3"]
+    u0 = svc.commands.voltages()["j3"]
     bus.send(can.Message(arbitration_id=cmd.frame_id, data=b"\x01\x02", is_extended_id=False))          # wrong DLC
     bus.send(can.Message(arbitration_id=0x5A5, data=b"\x00" * 8, is_extended_id=False))                  # unknown id
     bus.send(can.Message(arbitration_id=cmd.frame_id, is_remote_frame=True, dlc=4, is_extended_id=False))  # remote
@@ -121,7 +121,7 @@ def test_bad_frames_are_counted_and_ignored_while_the_loop_keeps_its_rate(virtua
     assert c.get(("rx", "unknown_id"), 0) > before.get(("rx", "unknown_id"), 0)
     assert c.get(("rx", "remote_frame"), 0) > before.get(("rx", "remote_frame"), 0)
     assert c.get(("rx", "out_of_range"), 0) > before.get(("rx", "out_of_range"), 0)
-    assert svc.command_voltages()["j3"] == pytest.approx(9.9)     # the valid frame counted, 12 V ignored
+    assert svc.commands.voltages()["j3"] == pytest.approx(9.9)     # the valid frame counted, 12 V ignored
     # a flood: every frame is counted (as unknown or, beyond the budget, as flood); the plant keeps 1 kHz
     stop = threading.Event()
     sent = [0]
@@ -146,14 +146,14 @@ def test_bad_frames_are_counted_and_ignored_while_the_loop_keeps_its_rate(virtua
     stop.set()
     th.join()
     elapsed = time.monotonic() - w0
-    ticks = svc.loop_stats()["ticks"] - int(t0[0])
+    ticks = svc.documents.loop_stats()["ticks"] - int(t0[0])
     assert ticks == pytest.approx(1000 * elapsed, rel=0.05)
     assert sent[0] > 0
     deadline = time.monotonic() + 30.0
     while accounted() < sent[0] and time.monotonic() < deadline:
         time.sleep(0.05)
     assert accounted() == sent[0]          # nothing silently lost, nothing counted twice
-    svc.write_commands({2: u0}, 1.0)
+    svc.commands.write({2: u0}, 1.0)
 
 
 @pytest.mark.slow

@@ -41,7 +41,7 @@ def test_joint_transforms_stream_at_30hz(hydrolek):
             t0 = time.monotonic()
             time.sleep(WINDOW_S)
             t1 = time.monotonic()
-            q_end = s.svc.state()["pose"]["j1"]
+            q_end = s.svc.documents.state()["pose"]["j1"]
             c.put("/api/v1/commands", json={"voltages": {"j1": 0.0}}).raise_for_status()
         rate, msgs = frame_rate(probe, node, t0, t1)
         assert rate >= 30.0, f"j1 frame updates at {rate:.1f} Hz over {WINDOW_S} s (need >= 30)"
@@ -73,12 +73,12 @@ def test_panel_follows_the_plant(hydrolek):
     assert "connected" in panel.status.content and "E-STOP released" in panel.status.content
     assert "Loop health" in panel.health.content and "overruns" in panel.health.content
     # E-STOP from elsewhere shows in the panel and locks the sliders
-    s.svc.set_estop(True)
+    s.svc.commands.set_estop(True)
     try:
         wait_for(lambda: "E-STOP ENGAGED" in panel.status.content, 5, "the E-STOP banner")
         assert all(sl.disabled for sl in panel.sliders.values()) and not panel.release_button.disabled
     finally:
-        s.svc.set_estop(False)
+        s.svc.commands.set_estop(False)
     wait_for(lambda: not panel.sliders["j1"].disabled, 5, "the sliders to unlock")
     # the plot history carries plant time and commands
     t, v = panel.history.series("j3")

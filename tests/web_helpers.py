@@ -75,7 +75,7 @@ class InProcessServer:
             self.thread = threading.Thread(target=self.server.run, daemon=True)
             self.thread.start()
             wait_for(lambda: self.server.started, 30, "uvicorn to start")
-            wait_for(lambda: self.svc.state()["tick"] > 50, 60, "the engine to run")
+            wait_for(lambda: self.svc.documents.state()["tick"] > 50, 60, "the engine to run")
         except BaseException:
             self.svc.close()
             sys.setswitchinterval(self._switch)

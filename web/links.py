@@ -4,15 +4,19 @@ Two kinds, one interface (what :class:`web.viewer.Viewer` and :class:`web.panel.
 
 * :class:`LocalLink` talks to an in-process :class:`hil_server.service.HilService` (``hydrohil serve``):
   the state is a copy out of the engine's shared memory (~25 us), commands are written straight into
-  the command area with source ``viewer``.
-* :class:`RemoteLink` attaches to a running server over REST: it keeps the latest state document
-  from ``WebSocket /api/v1/stream`` (a reader thread that reconnects on its own) and sends commands
-  with ``PUT /api/v1/commands`` from a sender thread that coalesces slider drags (latest value wins),
-  so a slow network never blocks the GUI.
+  the command table with source ``viewer``.
+* :class:`RemoteLink` attaches to a running server through :class:`hil_server.client.HilClient`: it
+  keeps the latest state document from ``WebSocket /api/v1/stream`` (a reader thread that reconnects
+  on its own; a server with a token streams only to a link that has it, so a link without the token
+  polls the public ``GET /api/v1/state`` instead, read-only) and sends commands with
+  ``PUT /api/v1/commands`` from a sender thread that coalesces slider drags (latest value wins), so a
+  slow network never blocks the GUI.
 
-Interface: ``spec`` (sim_core RobotSpec), ``latest()`` -> state document or None, ``status()`` ->
-connection dict, ``set_voltages({joint: V})``, ``neutral([joints])``, ``set_estop(bool)``,
-``can_command``, ``errors`` (callbacks ``f(message)`` for refused commands), ``close()``.
+Interface: ``spec`` (sim_core RobotSpec), ``latest()`` -> state document or None (None while the
+engine is down), ``status()`` -> connection dict (with ``engine`` and ``warnings``),
+``set_voltages({joint: V})``, ``neutral([joints])``, ``set_estop(bool)``, ``can_command``, ``token``
+(what a browser must enter to command through a non-loopback viewer), ``errors`` (callbacks
+``f(message)`` for refused commands), ``close()``.
 """
 
 from __future__ import annotations
@@ -21,9 +25,8 @@ import json
 import logging
 import threading
 import time
-import urllib.error
-import urllib.parse
-import urllib.request
+
+from hil_server.client import ClientError, HilClient
 
 log = logging.getLogger("hydrohil.web")
 
@@ -44,39 +47,47 @@ class LocalLink:
         self._src = SRC_VIEWER
         self.errors: list = []
         self.can_command = True
+        self.token = service.cfg.token
 
     @property
     def spec(self):
-        return self.service.spec  # follows parameter patches (cylinder mounts, command ranges)
+        return self.service.params.spec  # follows parameter patches (cylinder mounts, command ranges)
 
     @property
     def robot(self) -> str:
-        return self.service.spec.name
+        return self.spec.name
 
     def latest(self) -> dict | None:
-        return self.service.state()
+        from hil_server.service import ServiceError
+
+        try:
+            return self.service.documents.state()
+        except ServiceError:
+            return None   # engine down: nothing to show as if it were the plant
 
     def status(self) -> dict:
         try:
-            alive = bool(self.service.health()["engine_alive"])
+            h = self.service.health.document()
         except Exception:  # noqa: BLE001 - a closing service
-            alive = False
-        return {"kind": self.kind, "where": "in-process", "connected": alive, "age_s": 0.0,
-                "detail": "engine running" if alive else "engine down", "reconnects": 0}
+            h = {"engine_alive": False, "engine": {"state": "stopped"}, "warnings": []}
+        up = h["engine"]["state"] == "running"
+        return {"kind": self.kind, "where": "in-process", "connected": up, "age_s": 0.0,
+                "detail": "engine running" if up else (h["engine"].get("reason") or "engine down"), "reconnects": 0,
+                "engine": h["engine"], "warnings": h.get("warnings", [])}
 
     def set_voltages(self, voltages: dict[str, float]) -> None:
         from hil_server.service import ServiceError
 
         try:
-            self.service.set_voltages(voltages, self._src)
+            self.service.commands.set(voltages, self._src)
         except ServiceError as exc:
             raise LinkError(str(exc)) from None
 
     def neutral(self, joints=None) -> None:
-        self.service.neutral(joints, self._src)
+        self.set_voltages({j: 0.0 for j in (self.spec.joint_names if joints is None else joints)})
 
     def set_estop(self, on: bool) -> None:
-        self.service.set_estop(bool(on))
+        self.service.commands.set_estop(bool(on))
 
     def close(self) -> None:
         pass
@@ -90,20 +101,22 @@ class RemoteLink:
     def __init__(self, url: str, token: str | None = None, *, rate_hz: float = 60.0, timeout: float = 5.0):
         from sim_core.model.spec import SpecError, load_robot
 
-        u = urllib.parse.urlsplit(url if "://" in url else f"http://{url}")
-        if u.scheme not in ("http", "https"):
-            raise LinkError(f"--url {url!r}: use http://host:port (the server's REST address)")
-        self.base = f"{u.scheme}://{u.netloc}{u.path.rstrip('/')}"
-        ws_scheme = "wss" if u.scheme == "https" else "ws"
-        rate = min(max(rate_hz, 1.0), 250.0)
-        self.ws_url = f"{ws_scheme}://{u.netloc}{u.path.rstrip('/')}/api/v1/stream?rate={rate:g}"
+        try:
+            self.client = HilClient(url, token, timeout=timeout)
+            health = self.client.health()
+        except ClientError as exc:
+            raise LinkError(str(exc)) from None
+        self.base = self.client.base
+        self.rate_hz = min(max(rate_hz, 1.0), 250.0)
+        self.ws_url = self.client.stream_url(self.rate_hz)
         self.token = token
         self.timeout = timeout
         self.errors: list = []
-        health = self._request("GET", "/api/v1/health")
         self.robot = health["robot"]
         self.auth_required = bool(health.get("auth_required"))
         self.can_command = not self.auth_required or bool(token)
+        self.polling = self.auth_required and not token    # the stream needs the token; GET /state does not
+        self._health = health
         try:
             self.spec = load_robot(self.robot)
         except SpecError as exc:
@@ -120,38 +133,25 @@ class RemoteLink:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._ws = None
-        self._reader = threading.Thread(target=self._read_loop, name="hydrohil-view-stream", daemon=True)
+        self._reader = threading.Thread(target=self._poll_loop if self.polling else self._read_loop,
+                                        name="hydrohil-view-stream", daemon=True)
         self._sender = threading.Thread(target=self._send_loop, name="hydrohil-view-commands", daemon=True)
+        self._health_thread = threading.Thread(target=self._health_loop, name="hydrohil-view-health", daemon=True)
         self._reader.start()
         self._sender.start()
+        self._health_thread.start()
 
-    # ---- HTTP --------------------------------------------------------------------------------
     def _request(self, method: str, path: str, body: dict | None = None):
-        data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.base + path, data=data, method=method)
-        req.add_header("Accept", "application/json")
-        if data is not None:
-            req.add_header("Content-Type", "application/json")
-        if self.token and method != "GET":
-            req.add_header("Authorization", f"Bearer {self.token}")
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as resp:
-                return json.loads(resp.read() or b"null")
-        except urllib.error.HTTPError as exc:
-            try:
-                detail = json.loads(exc.read()).get("detail", exc.reason)
-            except Exception:  # noqa: BLE001
-                detail = exc.reason
-            raise LinkError(f"{method} {path}: HTTP {exc.code}: {detail}") from None
-        except (urllib.error.URLError, OSError, ValueError) as exc:
-            reason = getattr(exc, "reason", exc)
-            raise LinkError(f"cannot reach {self.base} ({method} {path}): {reason}") from None
+            return self.client.request(method, path, body)
+        except ClientError as exc:
+            raise LinkError(str(exc)) from None
 
     def _mirror_parameters(self) -> None:
         """Take the server's cylinder mounts and command ranges (a --params file may change them)."""
         try:
-            values = self._request("GET", "/api/v1/parameters")["values"]
-        except (LinkError, KeyError, TypeError) as exc:
+            values = self.client.parameters()["values"]
+        except (ClientError, KeyError, TypeError) as exc:
             log.warning("viewer: could not read the server's parameters (%s); using the built-in spec", exc)
             return
         for path, value in values.items():
@@ -163,36 +163,62 @@ class RemoteLink:
                 except Exception as exc:  # noqa: BLE001 - keep the local value, say so
                     log.warning("viewer: parameter %s from the server not applied: %s", path, exc)
 
-    # ---- stream --------------------------------------------------------------------------------
+    # ---- state ---------------------------------------------------------------------------------
+    def _received(self, doc: dict) -> None:
+        with self._lock:
+            self._state = doc
+            self._rx_time = time.monotonic()
+            self._rx_count += 1
+            self._connected = True
+            self._error = ""
+
+    def _lost(self, exc: BaseException) -> None:
+        with self._lock:
+            if self._connected:
+                self._reconnects += 1
+            self._connected = False
+            self._state = None
+            self._error = f"{type(exc).__name__}: {exc}"[:200]
+
     def _read_loop(self) -> None:
         from websockets.sync.client import connect
 
         backoff = 0.2
         while not self._stop.is_set():
             try:
-                with connect(self.ws_url, open_timeout=self.timeout, close_timeout=1.0, max_size=None) as ws:
+                with connect(self.ws_url, open_timeout=self.timeout, close_timeout=1.0, max_size=None,
+                             additional_headers=self.client.headers()) as ws:
                     self._ws = ws
                     backoff = 0.2
                     while not self._stop.is_set():
-                        doc = json.loads(ws.recv(timeout=max(self.timeout, 2.0)))
-                        with self._lock:
-                            self._state = doc
-                            self._rx_time = time.monotonic()
-                            self._rx_count += 1
-                            self._connected = True
-                            self._error = ""
-            except Exception as exc:  # noqa: BLE001 - any failure: mark down, retry
+                        self._received(json.loads(ws.recv(timeout=max(self.timeout, 2.0))))
+            except Exception as exc:  # noqa: BLE001 - any failure (also 1013 engine down): mark down, retry
                 if self._stop.is_set():
                     break
-                with self._lock:
-                    if self._connected:
-                        self._reconnects += 1
-                    self._connected = False
-                    self._error = f"{type(exc).__name__}: {exc}"[:200]
+                self._lost(exc)
                 self._stop.wait(backoff)
                 backoff = min(backoff * 2.0, 3.0)
             finally:
                 self._ws = None
+
+    def _poll_loop(self) -> None:
+        period = 1.0 / min(self.rate_hz, 20.0)
+        while not self._stop.is_set():
+            t0 = time.monotonic()
+            try:
+                self._received(self.client.state(timeout=self.timeout))
+            except ClientError as exc:
+                self._lost(exc)
+            self._stop.wait(max(0.0, period - (time.monotonic() - t0)))
+
+    def _health_loop(self) -> None:
+        while not self._stop.wait(1.0):
+            try:
+                h = self.client.health(timeout=self.timeout)
+            except ClientError:
+                continue
+            with self._lock:
+                self._health = h
 
     def latest(self) -> dict | None:
         with self._lock:
@@ -202,9 +228,11 @@ class RemoteLink:
         with self._lock:
             age = time.monotonic() - self._rx_time if self._rx_time else None
             connected = self._connected and age is not None and age < max(self.timeout, 2.0)
-            detail = "streaming" if connected else (self._error or "connecting")
+            detail = ("polling (read-only: no token)" if self.polling else "streaming") if connected \
+                else (self._error or "connecting")
             return {"kind": self.kind, "where": self.base, "connected": connected, "age_s": age,
-                    "detail": detail, "reconnects": self._reconnects, "messages": self._rx_count}
+                    "detail": detail, "reconnects": self._reconnects, "messages": self._rx_count,
+                    "engine": self._health.get("engine", {}), "warnings": list(self._health.get("warnings", []))}
 
     # ---- commands --------------------------------------------------------------------------------
     def _report(self, msg: str) -> None:
@@ -224,8 +252,8 @@ class RemoteLink:
             if not batch:
                 continue
             try:
-                self._request("PUT", "/api/v1/commands", {"voltages": batch, "source": "viewer"})
-            except LinkError as exc:
+                self.client.set_voltages(batch, source="viewer")
+            except ClientError as exc:
                 self._report(str(exc))
 
     def set_voltages(self, voltages: dict[str, float]) -> None:
@@ -255,5 +283,5 @@ class RemoteLink:
                 ws.close()
             except Exception:  # noqa: BLE001
                 pass
-        for t in (self._reader, self._sender):
+        for t in (self._reader, self._sender, self._health_thread):
             t.join(timeout=3.0)

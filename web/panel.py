@@ -6,6 +6,12 @@ Threads: GUI callbacks run in viser's threads and only call the link (microsecon
 queued, coalesced HTTP request for a remote server). :meth:`OperatorPanel.update` runs in the viewer's
 render thread at a few Hz and only assigns GUI values (viser sends just what changed).
 
+Who may command: a browser the Origin guard accepted (:mod:`.origin_guard`), through a link that can
+command (a remote server's token), and, when the viewer is bound beyond loopback, only after that
+browser entered the token (a field of its own, never shown to other browsers). Everyone else sees a
+read-only panel; E-STOP can be engaged from any accepted browser (stopping is always allowed),
+released only by one that may command.
+
 Safety rules:
 * E-STOP engages the service's latched stop (every valve at 0 V until released), zeroes and disables
   the sliders; a slider cannot command while the stop is engaged.
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import html
 import logging
+import secrets
 import threading
 import time
 
@@ -45,10 +52,13 @@ def _fmt(v, spec: str, none: str = "—") -> str:
 
 
 class OperatorPanel:
-    def __init__(self, server, link, *, scene=None, render_rate_hz: float = 40.0):
+    def __init__(self, server, link, *, scene=None, render_rate_hz: float = 40.0, guard=None, needs_token: bool = False):
         self.server = server
         self.scene = scene
         self.link = link
+        self.guard = guard
+        self.needs_token = needs_token
+        self._unlocked: set = set()            # client ids that entered the token
         spec = link.spec
         self.joints = list(spec.joint_names)
         self.ranges = {j: spec.joint(j).command_range for j in self.joints}
@@ -75,6 +85,10 @@ class OperatorPanel:
         if not link.can_command:
             gui.add_html("<div style='color:#b00;font-size:0.85em;padding:0 0.5em'>Read-only: the server needs a "
                          "token for commands (hydrohil view --token T).</div>")
+        elif needs_token:
+            gui.add_html("<div style='color:#b00;font-size:0.85em;padding:0 0.5em'>This monitor is reachable beyond "
+                         "loopback: it is read-only until this browser enters the token (below).</div>")
+        self.warnings = gui.add_html("")
         tabs = gui.add_tab_group()
         self.sliders, self.neutral_buttons, self.readouts = {}, {}, {}
         with tabs.add_tab("Joints", icon="adjustments"):
@@ -131,6 +145,45 @@ class OperatorPanel:
         self.neutral_all.on_click(self._on_neutral_all)
         self.link.errors.append(self.notify)
         server.on_client_disconnect(self._on_disconnect)
+        if needs_token and link.can_command:
+            server.on_client_connect(self._offer_token)
+
+    # ---- who may command ---------------------------------------------------------------------------
+    def _accepted(self, client) -> bool:
+        return client is None or self.guard is None or self.guard.allowed(client.client_id)
+
+    def may_command(self, client) -> bool:
+        if not (self.link.can_command and self._accepted(client)):
+            return False
+        return not self.needs_token or client is None or client.client_id in self._unlocked
+
+    def _refuse(self, client) -> bool:
+        """True (and the operator told why) when ``client`` may not command."""
+        if self.may_command(client):
+            return False
+        if not self._accepted(client):
+            return True   # a foreign page: no word back
+        why = ("read-only: enter the token first (this monitor is reachable beyond loopback)" if self.link.can_command
+               else "read-only: the server needs a token for commands (hydrohil view --token T)")
+        self.notify(why, client=client)
+        return True
+
+    def _offer_token(self, client) -> None:
+        """A token field and an unlock button for this browser only."""
+        field = client.gui.add_text("Token", initial_value="", hint="the server's token: unlocks commands here")
+        button = client.gui.add_button("Unlock commands", icon="lock-open")
+
+        def unlock(_ev):
+            given = str(field.value or "")
+            token = self.link.token or ""
+            if token and given and secrets.compare_digest(given.encode(), token.encode()):
+                self._unlocked.add(client.client_id)
+                field.value = ""
+                self.notify("commands unlocked in this browser", client=client, colour="green")
+            else:
+                self.notify("wrong token", client=client)
+
+        button.on_click(unlock)
 
     # ---- operator actions ----------------------------------------------------------------------------
     def notify(self, body: str, title: str = "HydroHIL", client=None, colour: str = "red") -> None:
@@ -145,6 +198,8 @@ class OperatorPanel:
     def _slider_cb(self, j: str):
         def cb(ev):
             if ev.client is None:  # the panel itself set the value (sync, E-STOP): not an operator command
+                return
+            if self._refuse(ev.client):
                 return
             v = float(self.sliders[j].value)
             if self._estop:
@@ -166,6 +221,8 @@ class OperatorPanel:
 
     def _neutral_cb(self, j: str):
         def cb(ev):
+            if self._refuse(ev.client):
+                return
             try:
                 self.link.neutral([j])
             except (LinkError, ValueError) as exc:
@@ -178,6 +235,8 @@ class OperatorPanel:
         return cb
 
     def _on_estop(self, ev) -> None:
+        if not self._accepted(ev.client):
+            return
         try:
             self.link.set_estop(True)
         except LinkError as exc:
@@ -187,6 +246,8 @@ class OperatorPanel:
         log.warning("viewer: E-STOP engaged from the browser")
 
     def _on_release(self, ev) -> None:
+        if self._refuse(ev.client):
+            return
         try:
             self.link.set_estop(False)
         except LinkError as exc:
@@ -195,6 +256,8 @@ class OperatorPanel:
         self._apply_estop(False)
 
     def _on_neutral_all(self, ev) -> None:
+        if self._refuse(ev.client):
+            return
         try:
             self.link.neutral(None)
         except (LinkError, ValueError) as exc:
@@ -207,7 +270,8 @@ class OperatorPanel:
         for j in self.joints:
             self._set_slider(j, 0.0)
 
-    def _on_disconnect(self, _client) -> None:
+    def _on_disconnect(self, client) -> None:
+        self._unlocked.discard(getattr(client, "client_id", None))
         if self.server.get_clients():
             return
         with self._lock:
@@ -259,6 +323,7 @@ class OperatorPanel:
             self.faults.content = self._faults_html(state)
             self.health.content = self._health_html(state, link_status, viewer_stats)
         self.status.content = self._status_html(state, link_status)
+        self.warnings.content = self._warnings_html(link_status)
         self._update_plots()
 
     def _sync_sliders(self, state: dict) -> None:
@@ -303,8 +368,23 @@ class OperatorPanel:
             f"(asked {_fmt(js.get('requested_voltage'), '+.2f')} V, {html.escape(str(src))}) {wd}</div>"
         )
 
+    def _warnings_html(self, ls: dict) -> str:
+        items = list(ls.get("warnings") or [])
+        if not items:
+            return ""
+        body = "".join(f"<li>{html.escape(str(w))}</li>" for w in items)
+        return ("<div style='background:#fdecea;color:#b00;border:2px solid #c0392b;border-radius:4px;"
+                f"font-size:0.85em;padding:0.3em 0.5em'><b>WARNING</b><ul style='margin:0;padding-left:1.2em'>{body}"
+                "</ul></div>")
+
     def _status_html(self, state: dict | None, ls: dict) -> str:
-        conn = _badge("connected", "#2e7d32") if ls.get("connected") else _badge("DISCONNECTED", "#c0392b")
+        engine = ls.get("engine") or {}
+        if engine.get("state") not in (None, "running"):
+            conn = _badge(f"ENGINE {str(engine.get('state')).upper()}", "#c0392b")
+        elif ls.get("connected"):
+            conn = _badge("connected", "#2e7d32")
+        else:
+            conn = _badge("DISCONNECTED", "#c0392b")
         where = html.escape(str(ls.get("where", "")))
         age = ls.get("age_s")
         lines = [f"<b>{html.escape(self.link.spec.name)}</b> · {conn} {where}"
@@ -319,7 +399,8 @@ class OperatorPanel:
             estop = _badge("E-STOP ENGAGED", "#c0392b") if state.get("estop") else _badge("E-STOP released", "#2e7d32")
             faults = _badge(f"{n_f} fault{'s' if n_f != 1 else ''}", "#c0392b" if n_f else "#2e7d32")
             wdb = _badge("watchdog: " + ", ".join(wd), "#c0392b") if wd else _badge("watchdog ok", "#2e7d32")
-            lines.append(f"{estop} {faults} {wdb}")
+            div = _badge("DIVERGED: reset needed", "#c0392b") + " " if state.get("diverged") else ""
+            lines.append(f"{div}{estop} {faults} {wdb}")
             lines.append(f"t = {state.get('time', 0.0):.2f} s · {html.escape(str(state.get('mode', '')))} · "
                          f"loop {loop.get('rate_hz', 0.0):.0f} Hz · overruns {loop.get('overruns', 0)} · "
                          f"late p99 {_fmt(late.get('p99'), '.0f')} µs")

@@ -16,7 +16,8 @@ class ViewerPlugin:
     REST and CAN come up meanwhile. :meth:`wait` returns the running :class:`web.viewer.Viewer`.
     """
 
-    def __init__(self, service, port: int, *, host: str = "127.0.0.1", rate_hz: float | None = None):
+    def __init__(self, service, port: int, *, host: str | None = None, rate_hz: float | None = None):
+        host = host or getattr(service.cfg, "viewer_host", "127.0.0.1")
         self.requested_port = port
         self.viewer = None
         self.error: BaseException | None = None
@@ -65,10 +66,10 @@ class ViewerPlugin:
             self._thread.join(timeout=30.0)  # a build under way closes its own viewer
 
 
-def attach(service, port: int, *, host: str = "127.0.0.1", rate_hz: float | None = None) -> ViewerPlugin:
+def attach(service, port: int, *, host: str | None = None, rate_hz: float | None = None) -> ViewerPlugin:
     """Start the browser monitor on the in-process service; returns at once (see :class:`ViewerPlugin`).
 
-    The viewer binds the loopback address: its panel can command the plant and has no token check, so
-    another machine watches through ``hydrohil view --url`` (REST, token-protected) instead.
+    The viewer binds ``--viewer-host`` (loopback by default). Beyond loopback its panel commands only
+    for a browser that entered the service's token; its WebSocket refuses foreign Origins.
     """
     return ViewerPlugin(service, port, host=host, rate_hz=rate_hz)

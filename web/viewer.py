@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from .origin_guard import OriginGuard
 from .panel import OperatorPanel
 from .scene import ArmScene
 
@@ -33,13 +34,22 @@ class Viewer:
             raise ValueError(f"viewer rate {rate_hz} Hz: must be between 1 and 120 Hz")
         self.link = link
         self.rate_hz = float(rate_hz)
+        from hil_server.security import is_loopback
+
         self.server = viser.ViserServer(host=host, port=port, label=f"HydroHIL · {link.spec.name}", verbose=False)
         self.host = host
         self.port = self.server.get_port()
+        loopback = is_loopback(host)
+        try:
+            self.guard = OriginGuard(self.server, loopback)
+        except RuntimeError:
+            self.server.stop()
+            raise
         self.server.scene.set_up_direction("+z")
         self.scene = ArmScene(self.server, link.spec)
         self._frame_camera()
-        self.panel = OperatorPanel(self.server, link, scene=self.scene, render_rate_hz=self.rate_hz)
+        self.panel = OperatorPanel(self.server, link, scene=self.scene, render_rate_hz=self.rate_hz, guard=self.guard,
+                                   needs_token=not loopback)
         self.frames = 0
         self._frame_times = np.zeros(64)
         self._frame_cpu = np.zeros(64)

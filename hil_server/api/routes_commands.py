@@ -2,6 +2,7 @@
 
 from fastapi import APIRouter, Depends
 
+from ..engine.shared import SRC_REST, SRC_VIEWER
 from .deps import get_service, require_token
 from .schemas import ChannelWrite, CommandRequest, CommandResponse, EstopRequest, model_json
 
@@ -10,60 +11,49 @@ router = APIRouter(tags=["commands"])
 
 @router.put("/api/v1/commands", response_model=CommandResponse, dependencies=[Depends(require_token)])
 async def put_commands(body: CommandRequest, svc=Depends(get_service)):
-    """Set command voltages (V) per joint. They hold until changed (no watchdog for REST commands)."""
-    from ..engine.shared import SRC_REST, SRC_VIEWER
-
+    """Set command voltages (V) per joint. They hold until changed (no watchdog for REST commands).
+    503 while the engine is down, 409 while the plant is diverged: nothing claims a valve moved."""
     source = SRC_VIEWER if body.source == "viewer" else SRC_REST
-    return model_json(CommandResponse, {"applied": svc.set_voltages(body.voltages, source), "estop": svc.estopped})
+    return model_json(CommandResponse, {"applied": svc.commands.set(body.voltages, source),
+                                        "estop": svc.commands.estopped})
 
 
 @router.get("/api/v1/commands")
 async def get_commands(svc=Depends(get_service)):
-    return {"voltages": svc.command_voltages(), "estop": svc.estopped}
+    return {"voltages": svc.commands.voltages(), "estop": svc.commands.estopped}
 
 
 @router.post("/api/v1/commands/neutral", dependencies=[Depends(require_token)])
 async def neutral(svc=Depends(get_service)):
     """Every valve to 0 V."""
-    svc.neutral()
-    return {"voltages": svc.command_voltages()}
+    svc.commands.neutral()
+    return {"voltages": svc.commands.voltages()}
 
 
 @router.get("/api/v1/estop")
 async def get_estop(svc=Depends(get_service)):
-    return {"engaged": svc.estopped}
+    return {"engaged": svc.commands.estopped}
 
 
 @router.put("/api/v1/estop", dependencies=[Depends(require_token)])
 async def put_estop(body: EstopRequest, svc=Depends(get_service)):
     """Engage: all valves neutral, commands zeroed, until released."""
-    svc.set_estop(body.engaged)
-    return {"engaged": svc.estopped}
+    svc.commands.set_estop(body.engaged)
+    return {"engaged": svc.commands.estopped}
 
 
 @router.get("/api/v1/cfp")
 async def cfp_modules(svc=Depends(get_service)):
     """The cFP view: modules, their channels (joint, role, direction) and current values (V)."""
-    snap = svc.block.snapshot()
-    cmd = svc.command_voltages()
-    return {"modules": {m: [{"channel": c.channel, "name": c.name, "joint": c.joint, "role": c.role,
-                             "direction": c.direction, "value": svc.channel_value(c, snap, cmd)} for c in chans]
-                        for m, chans in svc.channels.modules().items()}}
+    return {"modules": svc.cfp.modules()}
 
 
 @router.get("/api/v1/cfp/{module}/{channel}")
 async def cfp_read(module: str, channel: str, svc=Depends(get_service)):
-    from ..service import ServiceError
-
-    try:
-        ch = svc.channels.get(module, channel)
-    except KeyError as exc:
-        raise ServiceError(str(exc.args[0]), 404) from None
-    return {"module": module, "channel": channel, "joint": ch.joint, "role": ch.role, "direction": ch.direction,
-            "value": svc.channel_value(ch)}
+    return svc.cfp.describe(module, channel)
 
 
 @router.put("/api/v1/cfp/{module}/{channel}", dependencies=[Depends(require_token)])
 async def cfp_write(module: str, channel: str, body: ChannelWrite, svc=Depends(get_service)):
     """Write an analog output channel (amplifier input, 0..10 V) as a LabVIEW VI would."""
-    return svc.write_channel(module, channel, body.value)
+    return svc.cfp.write(module, channel, body.value)

@@ -1,8 +1,11 @@
-"""Recordings in the dataset CSV format of ``hydrohil simulate``: start, stop, list, download."""
+"""Recordings in the dataset format of ``hydrohil simulate`` (CSV, or Parquet): start, stop, list,
+download (the download needs the token when one is set)."""
 
 from fastapi import APIRouter, Depends
 from fastapi.responses import FileResponse
 
+from ..engine.process import EngineDown
+from ..service import ServiceError
 from .deps import get_service, require_token
 from .schemas import RecordingRequest
 
@@ -10,8 +13,6 @@ router = APIRouter(tags=["recordings"])
 
 
 def _err(exc, status):
-    from ..service import ServiceError
-
     return ServiceError(str(exc.args[0]) if exc.args else str(exc), status)
 
 
@@ -22,9 +23,11 @@ async def list_recordings(svc=Depends(get_service)):
 
 @router.post("/api/v1/recordings", dependencies=[Depends(require_token)])
 def start(body: RecordingRequest | None = None, svc=Depends(get_service)):
-    """Start recording every tick (one at a time; 409 if one runs)."""
+    """Start recording every tick (one at a time; 409 if one runs), as ``csv`` or ``parquet``."""
     try:
-        return svc.recorder.start(body.name if body else None).describe()
+        return svc.recorder.start(body.name if body else None, body.format if body else "csv").describe()
+    except (EngineDown, TimeoutError) as exc:
+        raise ServiceError(f"cannot start a recording: {exc}", 503) from None
     except RuntimeError as exc:
         raise _err(exc, 409) from None
 
@@ -46,13 +49,13 @@ async def describe(rec_id: str, svc=Depends(get_service)):
         raise _err(exc, 404) from None
 
 
-@router.get("/api/v1/recordings/{rec_id}/data", response_class=FileResponse)
+@router.get("/api/v1/recordings/{rec_id}/data", response_class=FileResponse, dependencies=[Depends(require_token)])
 def download(rec_id: str, svc=Depends(get_service)):
-    """The CSV (409 while the recording still runs)."""
+    """The recorded file (409 while the recording still runs)."""
     try:
         rec = svc.recorder.get(rec_id)
     except KeyError as exc:
         raise _err(exc, 404) from None
     if rec.active:
         raise _err(RuntimeError(f"recording {rec_id} is still running; stop it first"), 409)
-    return FileResponse(rec.path, media_type="text/csv", filename=rec.path.name)
+    return FileResponse(rec.path, media_type=rec.media_type, filename=rec.path.name)

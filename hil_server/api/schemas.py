@@ -82,6 +82,8 @@ class FaultRequest(Strict):
 
 class RecordingRequest(Strict):
     name: str | None = Field(None, min_length=1, max_length=80, pattern=r"^[A-Za-z0-9_.-]+$")
+    format: Literal["csv", "parquet"] = Field("csv", description="csv: the dataset CSV; parquet: one float64 column "
+                                                                  "per dataset column, units in the schema metadata")
 
 
 class LatenessStats(BaseModel):
@@ -122,6 +124,7 @@ class StateResponse(BaseModel):
     tick: int
     mode: str
     estop: bool
+    diverged: bool = Field(False, description="true while the diverged fault holds every valve neutral")
     supply_pressure: float = Field(description="Pa")
     joints: dict[str, JointState]
     pose: dict[str, float] = Field(description="true angle of every URDF joint (rad), for viewers")
@@ -129,16 +132,30 @@ class StateResponse(BaseModel):
     faults: list[dict]
 
 
+class EngineHealth(BaseModel):
+    state: str = Field(description="running | restarting | down | stopped")
+    reason: str | None = Field(description="why the engine is not running")
+    last_failure: str | None = Field(description="the last death or stall, also after a restart")
+    restarts: int
+    restart_policy: str
+    pid: int | None
+    down_for_s: float | None
+
+
 class HealthResponse(BaseModel):
-    status: str
+    status: str = Field(description="ok | engine_down | diverged")
     robot: str
     mode: str
     rate_hz: float
     tick: int
     uptime_s: float
-    engine_alive: bool
+    engine_alive: bool = Field(description="engine running, loop advancing and plant not diverged")
+    engine: EngineHealth
+    diverged: dict | None = Field(description="the latched diverged fault, or null")
     realtime_priority: bool
     realtime_note: str
     estop: bool
     can: dict | None
     auth_required: bool
+    insecure: bool = Field(description="serving beyond loopback without a token (--insecure)")
+    warnings: list[str] = Field(description="what is wrong or unsafe, in words")

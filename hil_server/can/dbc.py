@@ -4,11 +4,14 @@ written by :func:`generate_dbc`; a test keeps the files and the robots' joint li
 
 Conventions borrowed from hydraulic valve electronics:
 * CiA 301/408: SYNC (0x080) advances the plant in lockstep mode; EMCY (0x080 + node) reports faults
-  (error codes 0x8250 RPDO timeout = command watchdog, 0x8210 length error, 0x5000 device hardware,
-  0xFF01 command out of range, 0x0000 error reset); heartbeat 0x700 + node with the NMT state.
-* J1939: a command that stops arriving puts the valve in its safe (neutral) state; faults carry a
+  (error codes in :data:`EMCY_CODES`, 0x0000 error reset); heartbeat 0x700 + node with the NMT state
+  (0 boot-up once after an engine restart, 4 stopped while the engine is down, 5 operational, 127
+  pre-operational while paused).
+* J1939: a command that stops arriving puts the valve in its safe (neutral) state; the command's
+  ``counter`` is an alive (message) counter that must step by one per frame; faults carry a
   DM1-style SPN (proprietary range 520192 + joint index) and FMI (9 abnormal update rate, 2 erratic,
-  3 above range, 12 bad device, 31 condition exists) with an occurrence count.
+  3 above range, 12 bad device, 19 received network data in error, 31 condition exists) with an
+  occurrence count.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ NODE_ID = 0x10
 ID_SYNC = 0x080
 ID_EMCY = 0x080 + NODE_ID
 ID_STATUS = 0x101
+ID_ENGINE = 0x102
 ID_HEARTBEAT = 0x700 + NODE_ID
 BASE_COMMAND = 0x200
 BASE_FEEDBACK = 0x180
@@ -32,10 +36,33 @@ EMCY_TIMEOUT = 0x8250
 EMCY_LENGTH = 0x8210
 EMCY_HARDWARE = 0x5000
 EMCY_RANGE = 0xFF01
+EMCY_ENGINE_DIED = 0x6100
+EMCY_ENGINE_STALLED = 0x6101
+EMCY_DIVERGED = 0xFF02
+EMCY_CAN_OVERRUN = 0x8110
+EMCY_ALIVE_COUNTER = 0x8200
 SPN_BASE = 520192
-FMI_TIMEOUT, FMI_ERRATIC, FMI_ABOVE, FMI_BAD_DEVICE, FMI_CONDITION = 9, 2, 3, 12, 31
+FMI_TIMEOUT, FMI_ERRATIC, FMI_ABOVE, FMI_BAD_DEVICE, FMI_NETWORK_DATA, FMI_CONDITION = 9, 2, 3, 12, 19, 31
+
+# every EMCY error code this node sends, with its FMI and meaning (README, DBC comment)
+EMCY_CODES = {
+    EMCY_TIMEOUT: (FMI_TIMEOUT, "command timeout: no ValveCommand within --watchdog-ms, valve neutral (joint)"),
+    EMCY_LENGTH: (FMI_ERRATIC, "ValveCommand with a wrong DLC, ignored (joint)"),
+    EMCY_RANGE: (FMI_ABOVE, "ValveCommand outside the joint's command range, ignored (joint)"),
+    EMCY_ALIVE_COUNTER: (FMI_NETWORK_DATA, "ValveCommand alive counter stuck or jumping past the limit: "
+                                           "frames treated as lost until the counter steps again (joint)"),
+    EMCY_CAN_OVERRUN: (FMI_CONDITION, "frames on one CAN id beyond its budget dropped (flood; joint 0xFF)"),
+    EMCY_HARDWARE: (FMI_BAD_DEVICE, "injected fault active (joint, or 0xFF for the supply)"),
+    EMCY_DIVERGED: (FMI_ERRATIC, "plant diverged: valves held neutral until reset (joint 0xFF)"),
+    EMCY_ENGINE_DIED: (FMI_BAD_DEVICE, "engine process died: feedback stopped, NMT stopped (joint 0xFF)"),
+    EMCY_ENGINE_STALLED: (FMI_TIMEOUT, "engine loop stalled and was killed: feedback stopped, NMT stopped "
+                                       "(joint 0xFF)"),
+}
 
 STATUS_WATCHDOG, STATUS_FAULT, STATUS_ESTOP, STATUS_NOT_SENSED = 1, 2, 4, 8
+HIL_OK, HIL_WATCHDOG, HIL_FAULT, HIL_ESTOP, HIL_ENGINE_DOWN, HIL_DIVERGED = range(6)
+ENGINE_RUNNING, ENGINE_RESTARTING, ENGINE_DOWN, ENGINE_STOPPED = range(4)
+NMT_BOOT_UP, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0, 4, 5, 127
 
 
 def dbc_path(robot: str) -> Path:
@@ -82,9 +109,15 @@ def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list
         "",
         f"BO_ {ID_STATUS} HilStatus: 8 HIL",
         ' SG_ mode : 0|8@1+ (1,0) [0|3] "" CONTROLLER',
-        ' SG_ state : 8|8@1+ (1,0) [0|3] "" CONTROLLER',
+        ' SG_ state : 8|8@1+ (1,0) [0|5] "" CONTROLLER',
         ' SG_ watchdog_mask : 16|32@1+ (1,0) [0|4294967295] "" CONTROLLER',
         ' SG_ tick : 48|16@1+ (1,0) [0|65535] "" CONTROLLER',
+        "",
+        f"BO_ {ID_ENGINE} EngineStatus: 8 HIL",
+        ' SG_ engine_state : 0|8@1+ (1,0) [0|3] "" CONTROLLER',
+        ' SG_ restarts : 8|16@1+ (1,0) [0|65535] "" CONTROLLER',
+        ' SG_ error_code : 24|16@1+ (1,0) [0|65535] "" CONTROLLER',
+        ' SG_ diverged : 40|8@1+ (1,0) [0|1] "" CONTROLLER',
         "",
         f"BO_ {ID_HEARTBEAT} Heartbeat: 1 HIL",
         ' SG_ nmt_state : 0|8@1+ (1,0) [0|127] "" CONTROLLER',
@@ -112,24 +145,34 @@ def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list
             ' SG_ counter : 56|8@1+ (1,0) [0|255] "" CONTROLLER',
             "",
         ]
+    codes = "; ".join(f"0x{c:04X} {text} (FMI {fmi})" for c, (fmi, text) in EMCY_CODES.items())
     out += [
-        f'CM_ "HydroHIL CAN database for robot {robot}. Node id 0x{NODE_ID:02X}. SYNC advances the plant in lockstep mode; '
-        'EMCY error codes: 0x8250 command timeout (watchdog), 0x8210 length error, 0x5000 device fault, 0xFF01 command out '
-        'of range, 0x0000 reset. Angles for joints without a sensor and sensor_voltage are sent as not available '
-        '(0x7FFF / 0xFFFF) with status bit 8.";',
+        f'CM_ "HydroHIL CAN database for robot {robot}. Node id 0x{NODE_ID:02X}. SYNC advances the plant in lockstep mode. '
+        'Angles for joints without a sensor and sensor_voltage are sent as not available (0x7FFF / 0xFFFF) with status '
+        'bit 8. While the engine is down no JointFeedback/JointPressure is sent, the heartbeat says stopped and '
+        'HilStatus.state says engine_down.";',
         f'CM_ BO_ {ID_SYNC} "CiA 301 SYNC: in lockstep mode each SYNC advances the plant by one tick and triggers feedback.";',
-        f'CM_ BO_ {ID_EMCY} "CiA 301 EMCY with a J1939 DM1-style SPN/FMI; sent when a fault or watchdog trip starts and with error_code 0 when it clears.";',
-        f'CM_ BO_ {ID_HEARTBEAT} "CiA 301 heartbeat, 1 Hz: 5 operational, 127 pre-operational (paused), 4 stopped.";',
+        f'CM_ BO_ {ID_EMCY} "CiA 301 EMCY with a J1939 DM1-style SPN/FMI; sent when a fault starts and with error_code 0 '
+        f'when it clears. Error codes: {codes}; 0x0000 reset.";',
+        f'CM_ BO_ {ID_HEARTBEAT} "CiA 301 heartbeat, 1 Hz: 0 boot-up (once, after an engine restart), 4 stopped (engine '
+        'down), 5 operational, 127 pre-operational (paused).";',
+        f'CM_ BO_ {ID_ENGINE} "Engine supervision, 10 Hz: state (0 running, 1 restarting, 2 down, 3 stopped), restarts so '
+        'far, EMCY code of the last engine failure, diverged flag.";',
         f'CM_ SG_ {ID_STATUS} watchdog_mask "Bit a set: joint a (actuated joint order) is held neutral by the command watchdog.";',
     ]
     for a, j in enumerate(joints):
         out.append(f'CM_ BO_ {BASE_COMMAND + a} "Command voltage of joint {j} (LabVIEW Lab_out). Without a new command within the '
                    'watchdog timeout the valve goes neutral; the next command recovers it. DLC must be 4.";')
+        out.append(f'CM_ SG_ {BASE_COMMAND + a} counter "Alive counter (J1939/CiA): add 1 (mod 256) with every frame of '
+                   'this joint. A repeated (stuck) or jumping counter is counted; past --alive-counter-limit errors in a '
+                   'row (default 3) frames are treated as lost (no watchdog refresh: the valve goes neutral, EMCY '
+                   '0x8200) until the counter steps by one again.";')
         out.append(f'CM_ BO_ {BASE_FEEDBACK + a} "Measured angle (A*raw+B) and potentiometer voltage of joint {j}{"" if sensed[a] else " (no sensor: not available)"}.";')
     out += [
         f"VAL_ {ID_STATUS} mode 0 \"realtime\" 1 \"paused\" 2 \"lockstep\" 3 \"fast\" ;",
-        f"VAL_ {ID_STATUS} state 0 \"ok\" 1 \"watchdog\" 2 \"fault\" 3 \"estop\" ;",
-        f"VAL_ {ID_HEARTBEAT} nmt_state 4 \"stopped\" 5 \"operational\" 127 \"pre_operational\" ;",
+        f"VAL_ {ID_STATUS} state 0 \"ok\" 1 \"watchdog\" 2 \"fault\" 3 \"estop\" 4 \"engine_down\" 5 \"diverged\" ;",
+        f"VAL_ {ID_ENGINE} engine_state 0 \"running\" 1 \"restarting\" 2 \"down\" 3 \"stopped\" ;",
+        f"VAL_ {ID_HEARTBEAT} nmt_state 0 \"boot_up\" 4 \"stopped\" 5 \"operational\" 127 \"pre_operational\" ;",
         "",
     ]
     return "\n".join(out)

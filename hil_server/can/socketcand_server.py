@@ -7,6 +7,10 @@ client (not itself, like SocketCAN without RECV_OWN_MSGS); frames the emulator s
 client. Everything runs on one event loop (no thread per client): under ``hydrohil serve`` that is
 uvicorn's, so CAN and REST never fight over the GIL.
 
+The server binds loopback by default. CAN has no authentication: anyone who can reach the port can
+move a valve, so a non-loopback bind is allowed but warned about (``warnings``, shown in the log
+and ``/api/v1/health``).
+
 Rawmode subset of the protocol, as the reference daemon (socketcand/src/state_raw.c) and
 python-can's client speak it: ``< hi >`` on connect; ``< open BUS >`` -> ``< ok >``;
 ``< rawmode >`` -> ``< ok >``; client frames ``< send ID DLC b0 b1 ... >`` (unpadded hex bytes);
@@ -160,7 +164,12 @@ class SocketcandServer:
     """Transport ``socketcand``: serves bus ``vcan0`` on ``host:port``."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 29536, channel: str = "vcan0"):
+        from ..security import is_loopback
+
         self.host, self.port, self.channel = host, port, channel
+        self.warnings = [] if is_loopback(host) else [
+            f"socketcand CAN server exposed on {host}:{port}: CAN has no authentication, anyone who reaches "
+            "this port can command the valves"]
         self.counters: dict[str, int] = {}
         self.clients: list[_Client] = []
         self.on_frame = None
@@ -184,12 +193,12 @@ class SocketcandServer:
             self.clients.remove(client)
 
     def _from_client(self, client: _Client, msg: can.Message) -> None:
-        if len(self.clients) > 1:
+        admitted = self.on_frame(msg) is not False   # a frame dropped as flood is not forwarded either
+        if admitted and len(self.clients) > 1:
             line = format_frame(msg)
             for c in self.clients:
                 if c is not client:
                     c.deliver(line)
-        self.on_frame(msg)
 
     def send(self, msg: can.Message) -> None:
         self.send_many([msg])

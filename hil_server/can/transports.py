@@ -6,6 +6,8 @@
 * ``socketcan[:iface]``  kernel SocketCAN, e.g. a vcan on Linux hosts that have the module
 * ``socketcand[:port][@host]``  our socketcand-protocol TCP server, bus name 'vcan0', for stock
   python-can clients in other processes where there is no kernel CAN (default 127.0.0.1:29536)
+* ``udp_multicast[:group][@port][,hop_limit=N]``  python-can's UDP multicast bus (no kernel CAN, no
+  server: every process on the group is a node); this host only unless ``hop_limit`` >= 1
 
 A transport delivers received frames to ``on_frame`` on the bridge's event loop and sends frames
 from it. python-can buses are wrapped with a :class:`can.Notifier` bound to that loop. More kinds
@@ -37,6 +39,14 @@ class PythonCanTransport:
 
         self._notifier = can.Notifier(self.bus, [_Listener()], timeout=0.1, loop=loop)
 
+    @property
+    def counters(self) -> dict:
+        return dict(getattr(self.bus, "counters", {}))
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(getattr(self.bus, "warnings", []))
+
     def send(self, msg: can.Message) -> None:
         self.bus.send(msg)
 
@@ -51,6 +61,19 @@ class PythonCanTransport:
 
     def describe(self) -> dict:
         return {"bus": getattr(self.bus, "channel_info", str(self.bus))}
+
+
+def _udp_multicast(arg: str):
+    from .udp_multicast import open_bus
+
+    try:
+        bus = open_bus(arg)
+    except can.CanError as exc:
+        raise OSError(str(exc)) from exc
+    if not bus.host_only:
+        bus.warnings = [f"udp_multicast CAN bus open to the network (hop_limit {bus._multicast.hop_limit}): CAN has "
+                        "no authentication, any host on the segment can command the valves"]
+    return PythonCanTransport(bus)
 
 
 def _virtual(arg: str):
@@ -72,7 +95,8 @@ def _socketcand(arg: str):
     return SocketcandServer(host=host or "127.0.0.1", port=port)
 
 
-TRANSPORTS = {"virtual": _virtual, "socketcan": _socketcan, "socketcand": _socketcand}
+TRANSPORTS = {"virtual": _virtual, "socketcan": _socketcan, "socketcand": _socketcand,
+              "udp_multicast": _udp_multicast}
 
 
 def _factories() -> dict:
@@ -92,6 +116,10 @@ def check_spec(spec: str) -> None:
         port_s = arg.partition("@")[0]
         if port_s and not (port_s.isdigit() and 0 <= int(port_s) < 65536):
             raise ValueError(f"socketcand: port must be a number 0-65535, got {port_s!r}")
+    if kind == "udp_multicast":
+        from .udp_multicast import parse_arg
+
+        parse_arg(arg)
 
 
 def open_transport(spec: str):
@@ -100,7 +128,7 @@ def open_transport(spec: str):
     factories = _factories()
     try:
         t = factories[kind](arg)
-    except OSError as exc:
+    except (OSError, can.CanError) as exc:
         raise OSError(f"CAN transport {spec!r} could not be opened: {exc}") from exc
     return PythonCanTransport(t) if isinstance(t, can.BusABC) else t
 

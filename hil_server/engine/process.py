@@ -14,11 +14,13 @@ import os
 import pickle
 import signal
 import threading
+import time
 import traceback
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import atomics as A
 from . import shared as S
 
 log = logging.getLogger("hydrohil.engine")
@@ -76,8 +78,10 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(1)
 
 
-def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.Layout, conn, parent_pid: int = 0) -> None:
-    """Entry point of the engine process."""
+def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.Layout, conn, events,
+                parent_pid: int = 0) -> None:
+    """Entry point of the engine process. ``conn``: requests in, replies out (each tagged with its
+    request id); ``events``: one-way notices to the service's supervisor."""
     if parent_pid:
         _die_with_parent(parent_pid)
     from sim_core.plant import Plant
@@ -95,16 +99,15 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
         sim = Simulator(ctx)
         rt, note = _raise_priority(cfg)
         loop = EngineLoop(ctx, sim, block, conn, dt=1.0 / cfg.rate_hz, mode=cfg.mode,
-                          watchdog_s=cfg.watchdog_ms / 1000.0, realtime_priority=rt, lateness_ring=block.ring)
-        handler = ControlHandler(loop, conn, plant, cfg)
-        loop.handlers = handler
+                          watchdog_s=cfg.watchdog_ms / 1000.0, realtime_priority=rt, events=events)
+        loop.handlers = ControlHandler(loop, conn, cfg)
         if cfg.mode == "fast":
             _normal_priority()
-        conn.send(("ready", {"realtime_priority": rt, "priority_note": note, "pid": os.getpid()}))
+        conn.send((None, "ready", {"realtime_priority": rt, "priority_note": note, "pid": os.getpid()}))
         loop.run()
     except Exception as exc:  # report start-up failures to the service instead of dying silently
         try:
-            conn.send(("error", f"engine failed: {exc}\n{traceback.format_exc()}"))
+            conn.send((None, "error", f"engine failed: {exc}\n{traceback.format_exc()}"))
         except OSError:
             pass
     finally:
@@ -113,24 +116,24 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
 
 
 class ControlHandler:
-    """Applies one control request between ticks and replies on the pipe."""
+    """Applies one control request between ticks and replies on the pipe with the request's id."""
 
-    def __init__(self, loop, conn, plant, cfg: EngineConfig):
+    def __init__(self, loop, conn, cfg: EngineConfig):
         self.loop = loop
         self.conn = conn
-        self.plant = plant
         self.cfg = cfg
 
     def __call__(self, msg) -> None:
-        op, args = msg
         try:
-            result = getattr(self, "op_" + op)(*args)
-            self.conn.send(("ok", result))
+            rid, op, args = msg
+            handler = getattr(self, "op_" + op)
+        except (TypeError, ValueError, AttributeError):
+            self.conn.send((None, "error", f"malformed request {msg!r:.200}"))
+            return
+        try:
+            self.conn.send((rid, "ok", handler(*args)))
         except Exception as exc:  # noqa: BLE001 - the service turns this into a 4xx
-            self.conn.send(("error", str(exc)))
-
-    def op_ping(self):
-        return {"tick": self.loop.tick_count, "time": self.loop.ctx.time}
+            self.conn.send((rid, "error", str(exc)))
 
     def op_mode(self, mode: str):
         if mode not in S.MODES:
@@ -151,6 +154,7 @@ class ControlHandler:
 
     def op_reset(self, seed):
         self.loop.ctx.reset(seed)
+        self.loop.clear_diverged()
         self.loop._publish()
         return {"time": self.loop.ctx.time}
 
@@ -165,10 +169,6 @@ class ControlHandler:
                 ctx.set_parameter(p, v)
             raise
         return {p: ctx.get_parameter(p) for p in values}
-
-    def op_overrides(self, data: dict):
-        self.loop.ctx.apply_overrides(data, where="parameters")
-        return {}
 
     def op_enable_effect(self, name, joint, params):
         inst = self.loop.ctx.enable_effect(name, joint, **params)
@@ -191,17 +191,9 @@ class ControlHandler:
     def op_record(self, on: bool):
         b = self.loop.block
         if on:
-            b.rec_hdr[S.R_ROWS] = 0.0
-            self.loop.recording = True
-        else:
-            self.loop.recording = False
-        return {"rows": int(b.rec_hdr[S.R_ROWS])}
-
-    def op_work_stats(self):
-        w = self.loop._work[: min(self.loop._work_i, self.loop._work.shape[0])]
-        if w.size == 0:
-            return {"p50": 0.0, "p99": 0.0}
-        return {"p50": float(np.percentile(w, 50)), "p99": float(np.percentile(w, 99))}
+            A.store_release(b.sync, S.W_REC_ROWS, 0)
+        self.loop.recording = bool(on)
+        return {"rows": b.rec_rows()}
 
     def op_stop(self):
         self.loop.stop = True
@@ -209,40 +201,77 @@ class ControlHandler:
         return {"tick": self.loop.tick_count}
 
 
+class EngineError(RuntimeError):
+    """The engine refused a request (bad parameter, wrong mode, ...); the message says why."""
+
+
+class EngineDown(RuntimeError):
+    """The engine process is not running (died, stalled and killed, stopped, restarting)."""
+
+
 class EngineClient:
-    """Service-side handle: starts the engine process and sends it requests (thread-safe)."""
+    """Service-side handle: starts the engine process and sends it requests (thread-safe).
+
+    Every request carries an id and only the reply with that id answers it: a reply that arrives
+    after its request timed out, or an unsolicited message from a dying engine, is counted and
+    dropped, never taken as the answer to a later request."""
 
     def __init__(self, spec, cfg: EngineConfig, layout: S.Layout, block: S.SharedBlock, start_timeout: float = 120.0):
         self.cfg = cfg
         self.block = block
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
+        self.events, child_events = ctx.Pipe(duplex=False)
         self._lock = threading.Lock()
-        self.process = ctx.Process(target=engine_main, args=(pickle.dumps(spec), cfg, block.name, layout, child, os.getpid()),
+        self._next_id = 0
+        self.dropped_replies = 0
+        self.process = ctx.Process(target=engine_main, args=(pickle.dumps(spec), cfg, block.name, layout, child,
+                                                             child_events, os.getpid()),
                                    name="hydrohil-engine", daemon=True)
         self.process.start()
         child.close()
+        child_events.close()
         if not self._conn.poll(start_timeout):
             self.process.kill()
             raise RuntimeError("engine did not start within %.0f s" % start_timeout)
         try:
-            kind, info = self._conn.recv()
+            _, kind, info = self._conn.recv()
         except EOFError:
             self.process.join(1.0)
             raise RuntimeError(f"engine process exited during start-up (exit code {self.process.exitcode})") from None
         if kind != "ready":
+            self.process.join(5.0)
             raise RuntimeError(info)
         self.info = info
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
 
     def request(self, op: str, *args, timeout: float = 60.0):
         with self._lock:
             if not self.process.is_alive():
-                raise RuntimeError("engine process is not running")
-            self._conn.send((op, args))
-            self.block.ctl[0] += 1.0   # tells the realtime loop to look at the pipe
-            if not self._conn.poll(timeout):
-                raise TimeoutError(f"engine did not answer {op!r} within {timeout} s")
-            kind, payload = self._conn.recv()
+                raise EngineDown("engine process is not running")
+            self._next_id += 1
+            rid = self._next_id
+            try:
+                self._conn.send((rid, op, args))
+            except (OSError, ValueError) as exc:
+                raise EngineDown(f"engine control channel closed ({exc})") from None
+            A.fetch_add(self.block.sync, S.W_CTL, 1)   # tells the realtime loop to look at the pipe
+            end = time.monotonic() + timeout
+            while True:
+                left = end - time.monotonic()
+                if left <= 0 or not self._conn.poll(left):
+                    raise TimeoutError(f"engine did not answer {op!r} within {timeout:g} s")
+                try:
+                    msg = self._conn.recv()
+                except (EOFError, OSError):
+                    raise EngineDown(f"engine process ended while answering {op!r}") from None
+                if isinstance(msg, tuple) and len(msg) == 3 and msg[0] == rid:
+                    _, kind, payload = msg
+                    break
+                self.dropped_replies += 1
         if kind == "error":
             raise EngineError(payload)
         return payload
@@ -251,13 +280,17 @@ class EngineClient:
         if self.process.is_alive():
             try:
                 self.request("stop", timeout=timeout)
-            except (RuntimeError, TimeoutError, EngineError, OSError, EOFError):
+            except (RuntimeError, TimeoutError, OSError, EOFError):
                 pass
             self.process.join(timeout)
-            if self.process.is_alive():
-                self.process.kill()
-                self.process.join(1.0)
+        self.kill()
 
-
-class EngineError(RuntimeError):
-    """The engine refused a request (bad parameter, wrong mode, ...); the message says why."""
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join(2.0)
+        for c in (self._conn, self.events):
+            try:
+                c.close()
+            except OSError:
+                pass

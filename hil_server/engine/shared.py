@@ -1,36 +1,51 @@
 """Shared memory between the service process and the engine process.
 
-Layout (all float64, one block): a command area written by the service (REST, CAN, viewer) and
-read every tick by the engine; a state snapshot and loop statistics written by the engine every
-tick; a ring of recording rows. Each area that has several writers or readers is guarded by a
-sequence lock (seqlock: the writer makes the counter odd, writes, makes it even; a reader retries
-until it reads the same even counter before and after). On x86 (TSO) plain stores keep their order,
-which is all a seqlock needs.
+One block: a few int64 synchronisation words, then float64 areas: the command table (written by
+the service: REST, CAN, viewer; read by the engine every tick), the E-STOP flag, the state snapshot
+and loop statistics (written by the engine every tick), a ring of tick lateness and a ring of
+recording rows.
+
+The command table and the state snapshot are guarded by seqlocks with real acquire/release
+ordering (:mod:`.atomics`), so a reader never uses a torn copy on ARM either; a read that keeps
+racing the writer fails loudly (counted, shown in ``/metrics``) instead of returning a mix. The
+recording ring publishes its row count with a release store after the row is written. Statistics
+are single float64 values (each one written and read atomically on 64-bit hosts).
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from multiprocessing import shared_memory
 
 import numpy as np
+
+from . import atomics as A
+
+# synchronisation words (int64)
+W_CMD_SEQ, W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT, W_N = range(6)
+SYNC_WORDS = 8   # padded to one cache line
 
 # command columns
 C_VOLT, C_SOURCE, C_T_WALL, C_T_SIM, C_N = 0, 1, 2, 3, 4
 SRC_NONE, SRC_REST, SRC_CAN, SRC_VIEWER = 0.0, 1.0, 2.0, 3.0
 
 # state header
-S_SEQ, S_TICK, S_TIME, S_WALL, S_MODE, S_ESTOP, S_RTPRIO, S_P_SUPPLY, S_ALIVE, S_HDR = range(10)
+S_TICK, S_TIME, S_WALL, S_MODE, S_ESTOP, S_RTPRIO, S_P_SUPPLY, S_ALIVE, S_DIVERGED, S_HDR = range(10)
 # per-actuator state columns
 A_U_REQ, A_U, A_SENS_V, A_ANGLE, A_P_A, A_P_B, A_SPOOL, A_WATCHDOG, A_SOURCE, A_N = range(10)
 # loop statistics
-T_TICKS, T_OVERRUNS, T_RESYNCS, T_LATE_P50, T_LATE_P99, T_LATE_MAX, T_WORK_P50, T_WORK_P99, T_RATE, T_WD_TRIPS, T_N = range(11)
+(T_TICKS, T_OVERRUNS, T_RESYNCS, T_RATE, T_WD_TRIPS, T_ROLLBACKS, T_DIVERGED, T_CMD_READ_FAILS, T_RING_N,
+ T_N) = range(10)
 LATENESS_BUCKETS_US = (10, 25, 50, 100, 250, 500, 1000, 2500, 5000, 10000, 50000)
-# recording header: [rows written, active, stop_at_row]
-R_ROWS, R_ACTIVE, R_HDR = 0, 1, 2
 
 MODES = ("realtime", "paused", "lockstep", "fast")
-LATENESS_RING = 10000  # last ticks' lateness (s); stats[-1] counts entries written
+LATENESS_RING = 10000  # lateness (s) of the last ticks; stats[T_RING_N] counts entries written
+READ_TRIES = 10000     # seqlock attempts before a read is declared failed
+
+
+class SnapshotError(RuntimeError):
+    """No consistent copy could be read (a writer stuck mid-update, e.g. killed while writing)."""
 
 
 @dataclass(frozen=True)
@@ -45,22 +60,23 @@ class Layout:
         # time, u per joint, measured angle per sensed joint, p_a and p_b per joint, tick
         return 1 + self.n_act + self.n_sensed + 2 * self.n_act + 1
 
+    @property
+    def state_size(self) -> int:
+        return S_HDR + 2 * self.n_dof + self.n_act * A_N
+
     def sizes(self) -> dict[str, int]:
         return {
-            "cmd_seq": 1,
             "cmd": self.n_act * C_N,
             "estop": 1,
-            "ctl": 1,
-            "state": S_HDR + 2 * self.n_dof + self.n_act * A_N,
-            "stats": T_N + len(LATENESS_BUCKETS_US) + 1 + 1,
+            "state": self.state_size,
+            "stats": T_N + len(LATENESS_BUCKETS_US) + 1,
             "ring": LATENESS_RING,
-            "rec_hdr": R_HDR + 1,
             "rec": self.rec_capacity * self.rec_cols,
         }
 
     @property
     def nbytes(self) -> int:
-        return 8 * sum(self.sizes().values())
+        return 8 * (SYNC_WORDS + sum(self.sizes().values()))
 
 
 class SharedBlock:
@@ -70,22 +86,23 @@ class SharedBlock:
         self.layout = layout
         self._shm = shared_memory.SharedMemory(name=name, create=name is None, size=layout.nbytes)
         self.owner = name is None
-        buf = np.ndarray((layout.nbytes // 8,), dtype=np.float64, buffer=self._shm.buf)
+        self.sync = np.ndarray((SYNC_WORDS,), dtype=np.int64, buffer=self._shm.buf)
+        n_float = layout.nbytes // 8 - SYNC_WORDS
+        buf = np.ndarray((n_float,), dtype=np.float64, buffer=self._shm.buf, offset=8 * SYNC_WORDS)
         if self.owner:
+            self.sync[:] = 0
             buf[:] = 0.0
         off = 0
         views = {}
         for key, size in layout.sizes().items():
             views[key] = buf[off:off + size]
             off += size
-        self.cmd_seq = views["cmd_seq"]
-        self.cmd = views["cmd"].reshape(layout.n_act, C_N)
+        self.cmd_flat = views["cmd"]
+        self.cmd = self.cmd_flat.reshape(layout.n_act, C_N)
         self.estop = views["estop"]
-        self.ctl = views["ctl"]      # bumped by the service before each control request
         self.state = views["state"]
         self.stats = views["stats"]
         self.ring = views["ring"]
-        self.rec_hdr = views["rec_hdr"]
         self.rec = views["rec"].reshape(layout.rec_capacity, layout.rec_cols)
         n, na = layout.n_dof, layout.n_act
         self.q = self.state[S_HDR:S_HDR + n]
@@ -93,46 +110,56 @@ class SharedBlock:
         self.act = self.state[S_HDR + 2 * n:].reshape(na, A_N)
         self.buckets = self.stats[T_N:T_N + len(LATENESS_BUCKETS_US) + 1]
         self._buf = buf
+        self.read_failures = {"state": 0, "commands": 0}   # this process's failed reads (metrics)
+        self._fail_lock = threading.Lock()
 
     @property
     def name(self) -> str:
         return self._shm.name
 
-    # ---- seqlock helpers -----------------------------------------------------------------------
-    @staticmethod
-    def write_begin(seq: np.ndarray) -> None:
-        seq[0] += 1.0  # odd: writing
+    # ---- seqlocked areas ---------------------------------------------------------------------------
+    def _read(self, word: int, area: np.ndarray, out: np.ndarray, what: str) -> np.ndarray:
+        if A.read_consistent(self.sync, word, area, out, READ_TRIES):
+            return out
+        with self._fail_lock:
+            self.read_failures[what] += 1
+        raise SnapshotError(f"no consistent copy of the {what} area after {READ_TRIES} attempts "
+                            "(the engine stopped in the middle of an update)")
 
-    @staticmethod
-    def write_end(seq: np.ndarray) -> None:
-        seq[0] += 1.0  # even: consistent
+    def snapshot(self, out: np.ndarray | None = None) -> np.ndarray:
+        """A consistent copy of the state area (raises :class:`SnapshotError`, counted)."""
+        return self._read(W_STATE_SEQ, self.state, np.empty_like(self.state) if out is None else out, "state")
 
-    @staticmethod
-    def read(seq: np.ndarray, area: np.ndarray, out: np.ndarray, tries: int = 1000) -> bool:
-        for _ in range(tries):
-            s0 = seq[0]
-            if s0 % 2.0 == 0.0:
-                np.copyto(out, area)
-                if seq[0] == s0:
-                    return True
-        return False
+    def commands(self) -> np.ndarray:
+        """A consistent copy of the command table [n_act, C_N]."""
+        out = np.empty_like(self.cmd_flat)
+        return self._read(W_CMD_SEQ, self.cmd_flat, out, "commands").reshape(self.layout.n_act, C_N)
 
-    def snapshot(self) -> np.ndarray:
-        """A consistent copy of the state area (state[S_SEQ] is its own seqlock)."""
-        out = np.empty_like(self.state)
-        seq = self.state[S_SEQ:S_SEQ + 1]
-        for _ in range(10000):
-            s0 = seq[0]
-            if s0 % 2.0 == 0.0:
-                np.copyto(out, self.state)
-                if seq[0] == s0:
-                    return out
-        np.copyto(out, self.state)
-        return out
+    def write_commands(self, index: np.ndarray, values: np.ndarray) -> None:
+        """Rows ``index`` of the command table := ``values`` [k, C_N] under the seqlock. One writer at
+        a time: the service serialises its writers with a lock."""
+        A.write_begin(self.sync, W_CMD_SEQ)
+        self.cmd[index] = values
+        A.write_end(self.sync, W_CMD_SEQ)
+
+    def rec_rows(self) -> int:
+        """Recording rows the engine has published (acquire: the rows below it are complete)."""
+        return int(A.load_acquire(self.sync, W_REC_ROWS))
+
+    def beat(self) -> int:
+        return int(A.load_relaxed(self.sync, W_BEAT))
+
+    def reset_for_engine(self) -> None:
+        """Before a (re)started engine attaches: no writer is mid-update, nothing is alive yet."""
+        for w in (W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT):
+            A.store_release(self.sync, w, 0)
+        self.state[S_ALIVE] = 0.0
+        self.state[S_DIVERGED] = 0.0
 
     def close(self) -> None:
         # drop numpy views before closing the mapping
-        for attr in ("cmd_seq", "cmd", "estop", "ctl", "state", "stats", "ring", "rec_hdr", "rec", "q", "qd", "act", "buckets", "_buf"):
+        for attr in ("sync", "cmd_flat", "cmd", "estop", "state", "stats", "ring", "rec", "q", "qd", "act",
+                     "buckets", "_buf"):
             setattr(self, attr, None)
         self._shm.close()
         if self.owner:

@@ -1,0 +1,85 @@
+"""The viewer's WebSocket refuses foreign Origins.
+
+Any web page the operator has open could otherwise open ``ws://127.0.0.1:8080`` in the background and
+move sliders (cross-site WebSocket hijacking), and a DNS-rebinding page could pose as this host. A
+browser connection is accepted only when its ``Origin`` is the page's own address (Origin host:port
+equals the ``Host`` header) and, on a loopback bind, that address is a loopback name. Clients that
+send no Origin are not browsers and are let through (the attack needs a browser).
+
+viser has no hook for the WebSocket handshake, so the check runs as the first thing after it: a
+connect callback on viser's WebSocket server (``_websock_server``, whose connect callbacks all run
+before the connection's messages are read) that looks at the handshake request (``_live_connections``)
+and closes a foreign connection with code 1008 before it can send anything. The panel also refuses
+commands from any client this guard has not accepted (deny by default). Both attributes are viser
+internals: if they are missing the viewer does not start rather than run unguarded.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import urllib.parse
+
+log = logging.getLogger("hydrohil.web")
+
+LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1", "[::1]"}
+
+
+def _host_port(netloc: str, default_port: int) -> tuple[str, int]:
+    u = urllib.parse.urlsplit("//" + netloc)
+    host = (u.hostname or "").lower()
+    try:
+        port = u.port or default_port
+    except ValueError:
+        port = -1
+    return host, port
+
+
+def origin_allowed(origin: str | None, host_header: str | None, bind_is_loopback: bool) -> bool:
+    if origin is None:
+        return True
+    u = urllib.parse.urlsplit(origin)
+    if u.scheme not in ("http", "https") or not u.netloc or not host_header:
+        return False
+    default = 443 if u.scheme == "https" else 80
+    o_host, o_port = _host_port(u.netloc, default)
+    h_host, h_port = _host_port(host_header, default)
+    if (o_host, o_port) != (h_host, h_port):
+        return False
+    if bind_is_loopback:
+        return o_host in LOOPBACK_NAMES or o_host.startswith("127.")
+    return True
+
+
+class OriginGuard:
+    def __init__(self, viser_server, bind_is_loopback: bool):
+        self.bind_is_loopback = bind_is_loopback
+        self.accepted: set[int] = set()
+        self.refused = 0
+        self._lock = threading.Lock()
+        try:
+            ws_server = viser_server._websock_server
+            self._connections = ws_server._live_connections
+            ws_server.on_client_connect(self._on_connect)
+        except AttributeError as exc:
+            raise RuntimeError(f"this viser version offers no way to check WebSocket Origins ({exc}); "
+                               "the viewer does not start unguarded") from None
+
+    def allowed(self, client_id) -> bool:
+        with self._lock:
+            return client_id in self.accepted
+
+    async def _on_connect(self, conn) -> None:
+        ws = self._connections.get(conn.client_id)
+        request = getattr(ws, "request", None)
+        headers = request.headers if request is not None else {}
+        origin, host = headers.get("Origin"), headers.get("Host")
+        if ws is not None and origin_allowed(origin, host, self.bind_is_loopback):
+            with self._lock:
+                self.accepted.add(conn.client_id)
+            return
+        with self._lock:
+            self.refused += 1
+        log.warning("viewer: refused a WebSocket from Origin %r (page served as %r)", origin, host)
+        if ws is not None:
+            await ws.close(1008, "foreign Origin")
