@@ -91,7 +91,7 @@ def read_csv(path: str | Path) -> Dataset:
     from .ingest.text import open_text, read_columns
 
     layout = open_text(path, header=True, delimiter=",")
-    cols = read_columns(layout, list(range(layout.n_fields)), [repr(n) for n in layout.names])
+    cols = read_columns(layout, list(range(len(layout.names))), [repr(n) for n in layout.names])
     return Dataset(list(layout.names), cols.data)
 
 
@@ -108,7 +108,7 @@ def read_parquet(path: str | Path) -> Dataset:
         if si and unit not in (si, "m" if si == "rad" else si):
             raise DatasetError(f"{path}: column {name!r} is in {unit} (schema metadata hydrohil.units); a dataset is "
                                f"in SI units ({si}): read it with --column {name}={name}:{unit}")
-    data = np.column_stack([pt.column(n) for n in pt.names]) if pt.names else np.zeros((pt.rows, 0))
+    data = pt.columns(pt.names)
     return Dataset(list(pt.names), data, dict(pt.units), pt.robot)
 
 

@@ -136,3 +136,17 @@ def test_excite_and_simulate_write_and_read_parquet_like_csv(tmp_path):
     assert b.units["q_j2"] == "rad" and b.units["p_j2_a"] == "Pa" and b.units["u_j2"] == "V"
     np.testing.assert_allclose(a.data, b.data, rtol=1e-9, atol=1e-12)    # the CSV keeps 10 digits
     assert not np.array_equal(a.data, b.data)                           # the Parquet keeps all of them
+
+
+@pytest.mark.parametrize("header", ["time,u_j2,q_j2,\n", "time,u_j2,q_j2\n", ""])
+def test_rows_ending_with_a_delimiter(tmp_path, header):
+    """Spreadsheet exports and some loggers end every row with a delimiter: not an extra column."""
+    (tmp_path / "d.csv").write_text(header + "0,1.5,-0.3,\n0.02,2.5,-0.2,\n")
+    hydrolek = load_robot("hydrolek")
+    opts = ReadOptions(columns=() if header else ("time=0", "u_j2=1", "q_j2=2"))
+    res = import_record(tmp_path / "d.csv", hydrolek, opts)
+    np.testing.assert_array_equal(res.dataset.data, [[0, 1.5, -0.3], [0.02, 2.5, -0.2]])
+    assert any("ends with a delimiter" in n for n in res.notes)
+    (tmp_path / "e.csv").write_text(header + "0,1.5,-0.3,\n0.02,2.5,-0.2,7\n")    # a real fourth value
+    with pytest.raises(DatasetError, match=r"row 2 \(line \d\) has 4 values"):
+        import_record(tmp_path / "e.csv", hydrolek, opts)

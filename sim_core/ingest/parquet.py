@@ -61,24 +61,29 @@ class ParquetTable:
         self.rows = self._file.metadata.num_rows
         self._types = {f.name: f.type for f in schema}
 
-    def column(self, name: str) -> np.ndarray:
-        """Column ``name`` as float64; errors for text columns, missing and non-finite values."""
+    def columns(self, names: list[str]) -> np.ndarray:
+        """Columns ``names`` as float64 [rows, k], read in one pass; errors for text columns, missing
+        and non-finite values name the column and row."""
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        typ = self._types[name]
-        if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)):
-            raise _error(f"{self.path}: column {name!r} holds {typ}, not numbers")
+        for name in names:
+            typ = self._types[name]
+            if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)):
+                raise _error(f"{self.path}: column {name!r} holds {typ}, not numbers")
         try:
-            col = self._file.read(columns=[name]).column(0)
+            table = self._file.read(columns=list(dict.fromkeys(names)))
         except (pa.ArrowException, OSError) as exc:
-            raise _error(f"{self.path}: column {name!r} cannot be read ({exc})") from None
-        if col.null_count:
-            r = int(pc.index(pc.is_null(col), True).as_py()) + 1
-            raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value)")
-        out = np.asarray(col.cast(pa.float64()).to_numpy(), dtype=np.float64)
-        bad = np.flatnonzero(~np.isfinite(out))
-        if bad.size:
-            r = int(bad[0]) + 1
-            raise _error(f"{self.path}: column {name!r}: row {r}: {out[r - 1]} is not a finite number")
+            raise _error(f"{self.path}: cannot be read ({exc})") from None
+        out = np.empty((table.num_rows, len(names)))
+        for k, name in enumerate(names):
+            col = table.column(name)
+            if col.null_count:
+                r = int(pc.index(pc.is_null(col), True).as_py()) + 1
+                raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value)")
+            out[:, k] = col.to_numpy() if pa.types.is_float64(col.type) else col.cast(pa.float64()).to_numpy()
+            bad = np.flatnonzero(~np.isfinite(out[:, k]))
+            if bad.size:
+                r = int(bad[0]) + 1
+                raise _error(f"{self.path}: column {name!r}: row {r}: {out[r - 1, k]} is not a finite number")
         return out

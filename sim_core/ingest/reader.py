@@ -131,6 +131,9 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
         raise DatasetError(f"{where}no column maps to the dataset of {spec.name}: map them with --column NAME=SOURCE[:UNIT] "
                            f"(e.g. --column time=0:s --column u_{spec.joint_names[0]}=1:V)")
     has_time = any(m.name == "time" for m in maps)
+    if all(m.name == "time" for m in maps):
+        raise DatasetError(f"{where}only a time column is mapped: map the record's u_<joint>, q_<joint> or p_<joint>_a/_b "
+                           f"columns with --column NAME=SOURCE[:UNIT]")
     if has_time and options.rate is not None:
         raise DatasetError(f"{where}both a time column and --rate {options.rate:g}: give one (the time column keeps the "
                            f"real grid, --rate assumes a regular one)")
@@ -162,7 +165,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
             reports.append(ColumnReport("time", m.source_label, u, 0.0, float(t[-1])))
             continue
         kind, joint = column_kind(m.name, spec)
-        sat = find_saturation(raw[:, i], u) if kind != "time" else None
+        sat = find_saturation(raw[:, i], u)
         report_sat = None
         if sat is not None:
             s, mask = sat
@@ -244,13 +247,12 @@ class _Source:
         raise NotImplementedError
 
     def implicit_maps(self, maps: list[ColumnMap], spec, notes: list[str]) -> list[ColumnMap]:
-        """Header columns named like dataset columns of ``spec`` and not mapped otherwise: taken as they are (SI)."""
+        """Header columns named like dataset columns of ``spec`` and not mapped otherwise: taken as they are (SI).
+        Resolves (checks) the sources of ``maps`` on the way."""
+        used = {self.resolve(m) for m in maps}
         if self.names is None:
             return []
         targets = {m.name for m in maps}
-        used = set()
-        for m in maps:
-            used.add(self.resolve(m))
         out = []
         for i, n in enumerate(self.names):
             if n in targets or i in used:
@@ -297,7 +299,7 @@ class _TextSource(_Source):
                                             delimiter=parse_delimiter(options.delimiter), skip_rows=options.skip_rows)
         self.notes = self.layout.notes
         self.names = self.layout.names
-        self.n_fields = self.layout.n_fields
+        self.n_fields = self.layout.n_columns
 
     def read(self, sources, labels):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
@@ -322,7 +324,7 @@ class _ParquetSource(_Source):
 
     def read(self, sources, labels):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        data = np.column_stack([self.table.column(self.names[i]) for i in idx])
+        data = self.table.columns([self.names[i] for i in idx])
         return data, (lambda r: f"row {r}")
 
 

@@ -45,6 +45,13 @@ class TextLayout:
     data_line: int                  # its line number (from 1)
     notes: list[str] = field(default_factory=list)
 
+    trailing: bool = False          # every row ends with a delimiter: one empty field more, not a column
+
+    @property
+    def n_columns(self) -> int:
+        """Columns that hold data (the empty field after a trailing delimiter is none)."""
+        return self.n_fields - 1 if self.trailing else self.n_fields
+
     @property
     def first_row_label(self) -> str:
         return "the header" if self.names is not None else f"line {self.data_line} (the first row)"
@@ -167,17 +174,24 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
         header = not all(_is_number(c, decimal) for c in cells if c)
         if not header:
             notes.append(f"no header row: line {first[1]} holds numbers only, read as data (columns by 0-based index)")
-    if header:
-        names = [c.strip().strip('"') for c in cells]
-        if any(not n for n in names):
-            raise _error(f"{path}: line {first[1]}: empty column name in the header (column {names.index('')})")
-        if len(set(names)) != len(names):
-            dup = sorted({n for n in names if names.count(n) > 1})
-            raise _error(f"{path}: duplicate column(s) {', '.join(dup)}")
-        if second is None:
-            raise _error(f"{path}: no data rows after the header (line {first[1]})")
-        return TextLayout(path, delimiter, decimal, names, len(names), second[2], second[1], notes)
-    return TextLayout(path, delimiter, decimal, None, len(cells), first[2], first[1], notes)
+    if not header:
+        trailing = len(cells) > 1 and not cells[-1]
+        if trailing:
+            notes.append("every row ends with a delimiter: the empty field after it is not a column")
+        return TextLayout(path, delimiter, decimal, None, len(cells), first[2], first[1], notes, trailing)
+    names = [c.strip('"') for c in (cells[:-1] if len(cells) > 1 and not cells[-1] else cells)]
+    if any(not n for n in names):
+        raise _error(f"{path}: line {first[1]}: empty column name in the header (column {names.index('')})")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise _error(f"{path}: duplicate column(s) {', '.join(dup)}")
+    if second is None:
+        raise _error(f"{path}: no data rows after the header (line {first[1]})")
+    data_cells = _split(data_text, delimiter)
+    trailing = len(data_cells) == len(names) + 1 and not data_cells[-1].strip()
+    if trailing:
+        notes.append("every row ends with a delimiter: the empty field after it is not a column")
+    return TextLayout(path, delimiter, decimal, names, len(names) + trailing, second[2], second[1], notes, trailing)
 
 
 def _detect_delimiter(line: str) -> str | None:
@@ -222,6 +236,7 @@ def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
 
     names = [f"c{i}" for i in range(layout.n_fields)]
     wanted = [names[i] for i in indices]
+    read = list(dict.fromkeys(wanted + ([names[-1]] if layout.trailing else [])))   # after a trailing delimiter: empty
     try:
         with pa.memory_map(str(layout.path)) as src:
             src.seek(layout.data_offset)
@@ -229,12 +244,14 @@ def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
                 src,
                 read_options=pacsv.ReadOptions(column_names=names),
                 parse_options=pacsv.ParseOptions(delimiter=layout.delimiter),
-                convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in wanted},
-                                                     include_columns=wanted, decimal_point=layout.decimal),
+                convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in read},
+                                                     include_columns=read, decimal_point=layout.decimal),
             )
     except (pa.ArrowException, OSError):
         return None
     if any(table.column(n).null_count for n in wanted):
+        return None
+    if layout.trailing and table.column(names[-1]).null_count != table.num_rows:
         return None
     return np.column_stack([table.column(n).to_numpy() for n in wanted]) if table.num_rows else np.zeros((0, len(wanted)))
 
@@ -271,13 +288,17 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
     for line, cells in _rows(layout):
         if short is not None:   # a short row that is not the last one
             r, ln, k = short
-            raise _error(f"{path}: row {r} (line {ln}) has {k} values, {layout.first_row_label} has {n}")
+            raise _error(f"{path}: row {r} (line {ln}) has {k} values, {layout.first_row_label} has {layout.n_columns}")
         row += 1
+        if layout.trailing and len(cells) == n and cells[-1].strip():
+            raise _error(f"{path}: row {row} (line {line}) has {n} values, {layout.first_row_label} has {layout.n_columns} "
+                         f"(and a trailing delimiter)")
         if len(cells) != n:
             if len(cells) < n and cut_last_line:
                 short = (row, line, len(cells))
                 continue
-            raise _error(f"{path}: row {row} (line {line}) has {len(cells)} values, {layout.first_row_label} has {n}")
+            raise _error(f"{path}: row {row} (line {line}) has {len(cells)} values, {layout.first_row_label} has "
+                         f"{layout.n_columns}")
         for k, c in enumerate(indices):
             cell = cells[c]
             try:
@@ -291,7 +312,8 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
         lines.append(line)
     if short is not None:
         r, ln, k = short
-        layout.notes.append(f"row {r} (line {ln}), the last, has {k} of {n} values (cut short when logging stopped): dropped")
+        layout.notes.append(f"row {r} (line {ln}), the last, has {k} of {layout.n_columns} values (cut short when logging "
+                            f"stopped): dropped")
     if not lines:
         raise _error(f"{path}: no data rows")
     data = np.column_stack([np.frombuffer(c, dtype=float) for c in cols]) if cols else np.zeros((len(lines), 0))
