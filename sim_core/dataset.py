@@ -26,7 +26,7 @@ class DatasetError(ValueError):
 @dataclass
 class Dataset:
     columns: list[str]
-    data: np.ndarray  # [rows, columns]
+    data: np.ndarray  # [rows, columns] (column-major when read from a file: columns are contiguous)
     units: dict[str, str] = field(default_factory=dict)   # as stored in the file (Parquet metadata), if any
     robot: str | None = None                               # as stored in the file, if any
 

@@ -75,7 +75,7 @@ class ParquetTable:
             table = self._file.read(columns=list(dict.fromkeys(names)))
         except (pa.ArrowException, OSError) as exc:
             raise _error(f"{self.path}: cannot be read ({exc})") from None
-        out = np.empty((table.num_rows, len(names)))
+        out = np.empty((table.num_rows, len(names)), order="F")     # column by column: contiguous copies
         for k, name in enumerate(names):
             col = table.column(name)
             if col.null_count:

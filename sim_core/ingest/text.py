@@ -253,7 +253,10 @@ def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
         return None
     if layout.trailing and table.column(names[-1]).null_count != table.num_rows:
         return None
-    return np.column_stack([table.column(n).to_numpy() for n in wanted]) if table.num_rows else np.zeros((0, len(wanted)))
+    out = np.empty((table.num_rows, len(wanted)), order="F")     # column by column: contiguous copies
+    for k, n in enumerate(wanted):
+        out[:, k] = table.column(n).to_numpy()
+    return out
 
 
 def _rows(layout: TextLayout):
