@@ -19,7 +19,13 @@ def register(sub):
                    help="separate validation record, read like DATA (default: the last 40 %% of DATA)")
     p.add_argument("--report", required=True, metavar="DIR", help="output directory")
     p.add_argument("--format", choices=("html", "md"), default="html", help="report format (default html)")
-    p.add_argument("--workers", type=int, default=0, help="parallel processes for the candidate fits (default: CPU count)")
+    p.add_argument("--workers", type=int, default=0, help="parallel processes for the candidate fits (default: CPU count; "
+                   "with --backend ray: candidate fits in flight, default the cluster's CPUs)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="where the candidate fits run: a local process pool (default) or Ray tasks "
+                        "(pip install 'hydrohil[ray]')")
+    p.add_argument("--address", metavar="ADDR", help="with --backend ray: the Ray cluster (host:port, or 'auto' for the "
+                   "one started on this machine with 'ray start --head'); default: a new local Ray instance")
     p.add_argument("--effects", nargs="+", metavar="NAME", help="restrict the candidate bank to these effects")
     p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
                    help="where the simulation starts: the robot's initial positions, the record's first angles, or "
@@ -51,8 +57,23 @@ def run(args):
     rec = load_record(args.data, spec, initial_pose=args.initial_pose, options=opts)
     val = load_record(args.validation, spec, initial_pose=args.initial_pose, options=opts) if args.validation else None
     log = (lambda msg: None) if args.quiet else (lambda msg: print(msg, file=sys.stderr))
-    d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
-                      log=log, effects=args.effects)
+    backend = None
+    if args.backend == "ray":
+        from ..backends import BackendError, open_backend
+
+        try:
+            backend = open_backend("ray", address=args.address, workers=args.workers)
+        except BackendError as exc:
+            raise CliError(str(exc)) from None
+        log(f"candidate fits on {backend.describe()}")
+    elif args.address:
+        raise CliError("--address is for --backend ray")
+    try:
+        d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
+                          log=log, effects=args.effects, backend=backend)
+    finally:
+        if backend is not None:
+            backend.close()
     paths = report.write(d, args.report, spec, fmt=args.format)
     print(f"{d.verdict}: {args.data} on {spec.name} ({d.timings.get('total', 0):.1f} s)")
     for s in d.selected:

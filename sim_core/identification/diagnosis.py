@@ -129,14 +129,15 @@ def _pressure_noise(rec: Record) -> dict[str, float]:
 
 
 def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progress: bool = True,
-        log=None, effects: list[str] | None = None) -> Diagnosis:
+        log=None, effects: list[str] | None = None, backend=None) -> Diagnosis:
+    """``backend`` (:mod:`sim_core.backends`): where the candidate fits run, instead of the local pool."""
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):    # see selection.single_blas_thread
-        return _run(spec, rec, val, workers=workers, progress=progress, log=log, effects=effects)
+        return _run(spec, rec, val, workers=workers, progress=progress, log=log, effects=effects, backend=backend)
 
 
-def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool, log, effects) -> Diagnosis:
+def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool, log, effects, backend) -> Diagnosis:
     log = log or (lambda msg: None)
     t_start = time.perf_counter()
     timings: dict = {}
@@ -189,7 +190,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         noise = {j: check.noise[j] for j in targets}
     st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures))
-    sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log)
+    sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend)
     timings["selection"] = time.perf_counter() - t_start
 
     # final refit of the chosen model with the default integrator settings (two Gauss-Newton steps from

@@ -272,16 +272,34 @@ def _work(index: int):
     return index, ev
 
 
+def _task(shared, index: int):
+    """One candidate fit as a backend's task (``shared`` arrives once per round and worker)."""
+    if not _LIMITS:
+        single_blas_thread()
+    _SHARED.clear()
+    _SHARED.update(shared)
+    return _work(index)
+
+
 def evaluate_all(st: Setting, cands: list[Candidate], base_spec, accepted, base_out, base_cost, round_: int,
-                 workers: int = 0, progress: bool = True) -> list[Evaluation]:
-    """Evaluate candidates in parallel processes (forked: the compiled kernel is inherited)."""
+                 workers: int = 0, progress: bool = True, backend=None) -> list[Evaluation]:
+    """Evaluate candidates in parallel processes (forked: the compiled kernel is inherited), or as
+    tasks of ``backend`` (:mod:`sim_core.backends`, e.g. Ray) when one is given."""
     shared = {"setting": st, "candidates": cands, "base_spec": base_spec, "accepted": accepted,
               "base_out": base_out, "base_cost": base_cost, "round": round_}
     workers = workers or min(len(cands), os.cpu_count() or 1)
     order = sorted(range(len(cands)), key=lambda i: -len(cands[i].free) * (1 + len(cands[i].grid)))
     results: list[Evaluation | None] = [None] * len(cands)
     bar = _progress(len(cands), f"round {round_}: fitting {len(cands)} candidates", progress)
-    if workers <= 1 or len(cands) <= 1:
+    if backend is not None:
+        for o in backend.map(_task, shared, order):
+            if o.error is not None:
+                raise o.error
+            i, ev = o.value
+            results[i] = ev
+            bar.set_postfix_str(f"{ev.candidate.label} {ev.gain:+.1f}", refresh=False)
+            bar.update(1)
+    elif workers <= 1 or len(cands) <= 1:
         _init_worker(shared)
         for i in order:
             _, ev = _work(i)
@@ -320,7 +338,7 @@ class Selection:
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
-           max_effects: int = MAX_EFFECTS, log=None) -> Selection:
+           max_effects: int = MAX_EFFECTS, log=None, backend=None) -> Selection:
     log = log or (lambda msg: None)
     accepted: list[tuple[Candidate, dict]] = []
     accepted_evals: list[Evaluation] = []
@@ -340,7 +358,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         if not pool:
             stopped = "no candidates left"
             break
-        evals = evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress)
+        evals = evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress,
+                             backend=backend)
         rounds.append(evals)
         ok = [e for e in evals if e.accepted_ok]
         if not ok:
