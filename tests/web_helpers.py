@@ -47,7 +47,7 @@ class InProcessServer:
     """HilService + real uvicorn in a thread; ``start_transports`` loads the viewer plugin exactly as
     ``hydrohil serve`` does (entry point group ``hydrohil.viewers``)."""
 
-    def __init__(self, robot: str, tmp: Path, *, viewer: bool = True, token: str | None = None):
+    def __init__(self, robot: str, tmp: Path, *, viewer: bool = True, token: str | None = None, **config):
         import uvicorn
 
         from hil_server.api.app import create_app
@@ -60,7 +60,7 @@ class InProcessServer:
         self._switch = sys.getswitchinterval()
         sys.setswitchinterval(0.0005)
         cfg = ServiceConfig(robot=robot, can=None, port=self.port, viewer_port=free_port() if viewer else None,
-                            recordings_dir=str(tmp / "recordings"), token=token)
+                            recordings_dir=str(tmp / "recordings"), token=token, **config)
         self.svc = HilService(cfg)
         try:
             self.svc.start_transports()

@@ -101,8 +101,8 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
         loop = EngineLoop(ctx, sim, block, conn, dt=1.0 / cfg.rate_hz, mode=cfg.mode,
                           watchdog_s=cfg.watchdog_ms / 1000.0, realtime_priority=rt, events=events)
         loop.handlers = ControlHandler(loop, conn, cfg)
-        if cfg.mode == "fast":
-            _normal_priority()
+        if cfg.mode != "realtime":
+            _normal_priority()   # only realtime has deadlines; a long lockstep step must not starve the host
         conn.send((None, "ready", {"realtime_priority": rt, "priority_note": note, "pid": os.getpid()}))
         loop.run()
     except Exception as exc:  # report start-up failures to the service instead of dying silently
@@ -138,9 +138,9 @@ class ControlHandler:
     def op_mode(self, mode: str):
         if mode not in S.MODES:
             raise ValueError(f"unknown mode {mode!r}")
-        if mode == "fast":
+        if mode != "realtime":
             _normal_priority()
-        elif self.loop.mode == "fast":
+        elif self.loop.mode != "realtime":
             _raise_priority(self.cfg)
         self.loop.mode = mode
         self.loop.block.state[S.S_MODE] = S.MODES.index(mode)

@@ -15,6 +15,7 @@ are single float64 values (each one written and read atomically on 64-bit hosts)
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass
 from multiprocessing import shared_memory
 
@@ -41,7 +42,8 @@ LATENESS_BUCKETS_US = (10, 25, 50, 100, 250, 500, 1000, 2500, 5000, 10000, 50000
 
 MODES = ("realtime", "paused", "lockstep", "fast")
 LATENESS_RING = 10000  # lateness (s) of the last ticks; stats[T_RING_N] counts entries written
-READ_TRIES = 10000     # seqlock attempts before a read is declared failed
+READ_TRIES = 1000      # seqlock attempts per spin (a few microseconds)
+READ_PATIENCE_S = 0.02 # a read that found no consistent copy for this long fails (counted, never used)
 
 
 class SnapshotError(RuntimeError):
@@ -119,12 +121,22 @@ class SharedBlock:
 
     # ---- seqlocked areas ---------------------------------------------------------------------------
     def _read(self, word: int, area: np.ndarray, out: np.ndarray, what: str) -> np.ndarray:
-        if A.read_consistent(self.sync, word, area, out, READ_TRIES):
-            return out
+        """Spin a little, then yield the CPU (a writer descheduled mid-update needs it), for at most
+        ``READ_PATIENCE_S``; a writer that stays mid-update that long has stopped there."""
+        deadline = 0.0
+        while True:
+            if A.read_consistent(self.sync, word, area, out, READ_TRIES):
+                return out
+            now = time.monotonic()
+            if not deadline:
+                deadline = now + READ_PATIENCE_S
+            elif now > deadline:
+                break
+            time.sleep(0)
         with self._fail_lock:
             self.read_failures[what] += 1
-        raise SnapshotError(f"no consistent copy of the {what} area after {READ_TRIES} attempts "
-                            "(the engine stopped in the middle of an update)")
+        raise SnapshotError(f"no consistent copy of the {what} area within {READ_PATIENCE_S * 1e3:g} ms "
+                            "(the writer stopped in the middle of an update)")
 
     def snapshot(self, out: np.ndarray | None = None) -> np.ndarray:
         """A consistent copy of the state area (raises :class:`SnapshotError`, counted)."""

@@ -12,6 +12,9 @@ each part owns one responsibility and REST routers, the CAN bridge and viewers t
 * ``recorder``    recordings (:mod:`hil_server.recorder`)
 * ``metrics``     counters for ``/metrics`` (:mod:`.metrics`)
 * ``bridge``      CAN (:mod:`hil_server.can.bridge`), ``plugins`` viewers
+
+Construct it on a thread that lives as long as the service (the main thread): the engine process
+dies with the thread that started it (PR_SET_PDEATHSIG); restarts happen on the supervisor's thread.
 """
 
 from __future__ import annotations

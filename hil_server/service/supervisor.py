@@ -69,6 +69,8 @@ class EngineSupervisor:
         self.on_up: list = []                # f(restarts)
         self.on_event: list = []             # f(name, payload) for engine events (diverged)
         self._restart_times: deque = deque()
+        self._restart_at: float | None = None
+        self._restart_mode = engine_cfg.mode
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -130,6 +132,9 @@ class EngineSupervisor:
         last_beat, last_change = -1, time.monotonic()
         while not self._stop.is_set():
             eng = self.engine
+            if self.state == RESTARTING and self._restart_at is not None and time.monotonic() >= self._restart_at:
+                self._restart()   # here, on this long-lived thread: an engine's PR_SET_PDEATHSIG fires when
+                continue          # the thread that started it ends
             if self.state != RUNNING or eng is None:
                 self._stop.wait(POLL_S)
                 continue
@@ -183,10 +188,9 @@ class EngineSupervisor:
             except Exception:  # noqa: BLE001 - every listener gets its chance
                 log.exception("engine-down listener")
         if self.policy == "auto":
-            threading.Thread(target=self._restart, args=(last_mode,), name="hydrohil-engine-restart",
-                             daemon=True).start()
+            self._schedule_restart(last_mode)
 
-    def _restart(self, mode: str) -> None:
+    def _schedule_restart(self, mode: str) -> None:
         now = time.monotonic()
         while self._restart_times and now - self._restart_times[0] > 60.0:
             self._restart_times.popleft()
@@ -196,12 +200,14 @@ class EngineSupervisor:
                 self.reason += f"; not restarted: {len(self._restart_times)} restarts in the last minute"
             log.error("%s", self.down_message())
             return
-        delay = BACKOFF_S[min(len(self._restart_times), len(BACKOFF_S) - 1)]
-        if self._stop.wait(delay):
-            return
+        self._restart_mode = mode
+        self._restart_at = now + BACKOFF_S[min(len(self._restart_times), len(BACKOFF_S) - 1)]
+
+    def _restart(self) -> None:
+        self._restart_at = None
         self._restart_times.append(time.monotonic())
         try:
-            self._spawn(replace(self.engine_cfg, mode=mode))
+            self._spawn(replace(self.engine_cfg, mode=self._restart_mode))
         except Exception as exc:  # noqa: BLE001 - the engine would not start again: stay down, say why
             with self._lock:
                 if self._stop.is_set():
