@@ -1,0 +1,49 @@
+"""One record's diagnosis as a backend task: the worker side of a fleet.
+
+The driver reads the record (so that a bad column fails there, naming the file) and sends it with
+the configured robot; the worker runs the same diagnosis as ``hydrohil diagnose`` (its candidate fits
+one after another: the fleet's parallelism is across records), writes the report into a scratch
+directory and sends the files' bytes back, so that workers need not share a file system with the
+driver. Any error is this record's alone: it comes back as the record's error, and the fleet goes on.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class RecordJob:
+    name: str
+    record: object        # identification.record.Record
+
+
+@dataclass
+class Shared:
+    spec: object          # the configured robot spec (--params, --set, --effect applied)
+    effects: list[str] | None
+    fmt: str              # report format: html or md
+
+
+EXPECTED = (ValueError, ArithmeticError)   # bad data, a diverging model: the message says it all
+
+
+def diagnose_record(shared: Shared, job: RecordJob) -> dict:
+    from ..identification import diagnosis, report
+
+    t0 = time.perf_counter()
+    try:
+        d = diagnosis.run(shared.spec, job.record, None, workers=1, progress=False, effects=shared.effects)
+        with tempfile.TemporaryDirectory(prefix="hydrohil-fleet-") as tmp:
+            paths = report.write(d, tmp, shared.spec, fmt=shared.fmt)
+            files = {Path(p).name: Path(p).read_bytes() for p in paths.values()}
+    except EXPECTED as exc:
+        return {"ok": False, "error": str(exc), "seconds": time.perf_counter() - t0}
+    except Exception as exc:     # a defect, not bad data: keep where it happened
+        return {"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(),
+                "seconds": time.perf_counter() - t0}
+    return {"ok": True, "files": files, "seconds": time.perf_counter() - t0}
