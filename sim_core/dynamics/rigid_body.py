@@ -22,7 +22,8 @@ The joint types come as a trailing optional argument ``jtype`` (int64 [n], ``REV
 ``PRISMATIC`` = 1, as in :class:`sim_core.model.urdf.KinematicTree`). Omitted, or naming no
 prismatic joint, the all-revolute code runs: each function holds it as a second copy with the
 prismatic branches compiled out, so revolute trees pay one scan of ``jtype`` and give the same bits
-with and without it.
+with and without it. kinematics, crba and rnea are inlined into compiled callers (numba
+``inline="always"``): no call boundary in the kernel's hot path.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def has_prismatic(jtype):
     return False
 
 
-@njit(**_NJ)
+@njit(inline="always", **_NJ)
 def kinematics(parent, R_tree, p_tree, axis, com, inertia, q, Rw, ow, aw, cw, Iw, tmp33, jtype=None):
     """World pose of every body: rotation ``Rw``, body origin ``ow`` (m; the joint origin, moved by
     ``q_i`` along the axis for a prismatic joint), axis ``aw``, COM ``cw`` (m), inertia about the
@@ -159,7 +160,7 @@ def _kinematics(parent, R_tree, p_tree, axis, com, inertia, q, Rw, ow, aw, cw, I
         _store33(Iw, i, _mul33t(_mul33(B, _load33(inertia, i)), B))  # R I R^T
 
 
-@njit(**_NJ)
+@njit(inline="always", **_NJ)
 def rnea(parent, mass, gravity, ow, aw, cw, Iw, qd, qdd, gscale, w, dw, ao, F, N, tau, jtype=None):
     """Inverse dynamics ``tau = M qdd + c(q, qd) + gscale * g(q)`` given world kinematics (``ao``:
     acceleration of each body origin, m/s^2; ``F``, ``N``: force (N) and moment about the body
@@ -250,7 +251,7 @@ def _rnea(parent, mass, gravity, ow, aw, cw, Iw, qd, qdd, gscale, w, dw, ao, F, 
             N[p, 2] += N[i, 2] + m2
 
 
-@njit(**_NJ)
+@njit(inline="always", **_NJ)
 def crba(parent, mass, ow, aw, cw, Iw, mc, hc, Ic, M, jtype=None):
     """Joint-space inertia matrix ``M`` (dense [n,n], only the tree pattern is non-zero; kg m^2,
     kg m or kg by joint types). ``jtype``: joint types (omitted: all revolute)."""
