@@ -212,7 +212,7 @@ def _crba(prog: Program, tree: KinematicTree, joints: list[_Joint]):
     return [M[r][c] for r in range(n) for c in range(n)]
 
 
-def _renumber(blocks: list[Block], inputs: set) -> list[Block]:
+def _renumber(blocks: list[Block]) -> list[Block]:
     """Intermediate quantities renamed x0, x1, ... in order of first definition over the blocks
     (sin/cos of the joints keep their names s<i>, c<i>); a name means the same quantity in every
     block."""
@@ -244,7 +244,7 @@ def derive_equations(tree: KinematicTree, cse: bool = True) -> EquationsOfMotion
     c = _rnea(prog, tree, joints, qd, zero, [sp.Integer(0)] * 3)
     g = _rnea(prog, tree, joints, zero, zero, [_num(-x) for x in tree.gravity])
     taken: set[str] = set()
-    blocks = _renumber([extract(prog, out, cse=cse, taken=taken) for out in (M, c, g)], set(q) | set(qd))
+    blocks = _renumber([extract(prog, out, cse=cse, taken=taken) for out in (M, c, g)])
     return EquationsOfMotion(
         name=tree.name, dof_names=list(tree.dof_names),
         joint_types=["prismatic" if t == PRISMATIC else "revolute" for t in tree.jtype],

@@ -7,7 +7,7 @@ from .derivation import EquationsOfMotion
 UNITS = {"revolute": ("rad", "rad/s", "N m"), "prismatic": ("m", "m/s", "N")}
 
 
-def header_lines(eom: EquationsOfMotion, source: str, one_based: bool = False) -> list[str]:
+def header_lines(eom: EquationsOfMotion, source: str) -> list[str]:
     """Plain-text description (no comment markers) of a generated file."""
     g = ", ".join(f"{v:g}" for v in eom.gravity)
     lines = [
@@ -24,9 +24,8 @@ def header_lines(eom: EquationsOfMotion, source: str, one_based: bool = False) -
         "",
         "Joints (the order of q, qd and tau):",
     ]
-    base = 1 if one_based else 0
     width = max(len(n) for n in eom.dof_names)
     for i, (name, kind) in enumerate(zip(eom.dof_names, eom.joint_types)):
         unit = UNITS[kind]
-        lines.append(f"  {i + base:>3}  {name:<{width}}  {kind:<9}  q in {unit[0]}, tau in {unit[2]}")
+        lines.append(f"  {i:>3}  {name:<{width}}  {kind:<9}  q in {unit[0]}, tau in {unit[2]}")
     return lines
