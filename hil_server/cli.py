@@ -98,6 +98,12 @@ def run_serve(args) -> int:
 
     sys.setswitchinterval(0.0005)
     app = create_app(svc, start_transports=True)
+    # everything built so far lives as long as the server: keep it out of the cyclic GC, whose full
+    # collections of a start-up heap took ~50-100 ms (a stalled event loop: late CAN commands, slow REST)
+    import gc
+
+    gc.collect()
+    gc.freeze()
     server = uvicorn.Server(uvicorn.Config(app, host=cfg.host, port=cfg.port, log_level="warning", access_log=False,
                                            lifespan="on"))
     # uvicorn handles SIGTERM/SIGINT while serving (graceful shutdown: the lifespan closes the service,

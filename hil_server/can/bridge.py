@@ -78,6 +78,7 @@ class CanBridge:
         self._fb_counter = 0
         self._last_fb_tick = -1
         self._wd_prev = np.zeros(len(joints))
+        self._trips_prev = np.zeros(len(joints))
         self._faults_prev: set[str] = set()
         self._diverged_prev = False
         self._occurrence: dict[tuple, int] = {}
@@ -94,6 +95,8 @@ class CanBridge:
     async def start(self) -> None:
         self.loop = asyncio.get_running_loop()
         self.transport = open_transport(self.spec_str)
+        if hasattr(self.transport, "admit"):
+            self.transport.admit = self.admit   # lets the transport drop a flood before decoding it
         await self.transport.start(self._handle_safe)
         self._tx_task = asyncio.create_task(self._tx_loop())
         log.info("CAN on %s", self.spec_str)
@@ -145,29 +148,38 @@ class CanBridge:
     def _engine_up(self) -> None:
         self._last_fb_tick = -1
         self._wd_prev[:] = 0.0
+        self._trips_prev[:] = 0.0
         self._diverged_prev = False
         self._send(self.hb_msg, {"nmt_state": D.NMT_BOOT_UP}, "heartbeat")   # CiA 301: a restarted node boots up
         self._emcy(D.EMCY_RESET, None, D.EMCY_CODES[self._engine_error or D.EMCY_ENGINE_DIED][0])
         self.send_status()
 
     # ---- receive -------------------------------------------------------------------------------
-    def _handle_safe(self, msg: can.Message) -> bool:
+    def _handle_safe(self, msg: can.Message, admitted: bool = False) -> bool:
         try:
-            return self.handle(msg)
+            return self.handle(msg, admitted)
         except Exception:  # noqa: BLE001 - a bad frame must never stop the bridge
             self.count("rx", "malformed")
             log.exception("frame %s", msg)
             return False
 
-    def handle(self, msg: can.Message) -> bool:
-        """Process one received frame; False when it was dropped as flood (a gateway transport then
-        does not forward it to its other clients)."""
-        key = self.limiter.key(msg.arbitration_id, msg.is_extended_id)
+    def admit(self, arbitration_id: int, extended: bool) -> bool:
+        """The frame id's flood budget: False (counted, EMCY 0x8110 at most once a second per id)
+        when the frame is to be dropped."""
+        key = self.limiter.key(arbitration_id, extended)
         now = time.monotonic()
-        if not self.limiter.admit(key, now):
-            self.count("rx", "flood_dropped")
-            if self.limiter.report_due(key, now):
-                self._emcy(D.EMCY_CAN_OVERRUN, None, D.EMCY_CODES[D.EMCY_CAN_OVERRUN][0])
+        if self.limiter.admit(key, now):
+            return True
+        self.count("rx", "flood_dropped")
+        if self.limiter.report_due(key, now):
+            self._emcy(D.EMCY_CAN_OVERRUN, None, D.EMCY_CODES[D.EMCY_CAN_OVERRUN][0])
+        return False
+
+    def handle(self, msg: can.Message, admitted: bool = False) -> bool:
+        """Process one received frame; False when it was dropped as flood (a gateway transport then
+        does not forward it to its other clients). ``admitted``: the transport already asked
+        :meth:`admit`."""
+        if not admitted and not self.admit(msg.arbitration_id, msg.is_extended_id):
             return False
         if msg.is_error_frame:
             self.count("rx", "error_frame")
@@ -367,9 +379,14 @@ class CanBridge:
             return
         act = svc.block.act if act is None else act
         wd = act[:, S.A_WATCHDOG].copy()
-        for a in np.flatnonzero(wd != self._wd_prev):
-            self._emcy(D.EMCY_TIMEOUT if wd[a] else D.EMCY_RESET, int(a), D.FMI_TIMEOUT)
-        self._wd_prev = wd
+        trips = act[:, S.A_WD_TRIPS].copy()
+        # every trip gets its EMCY, also one that started and ended between two looks
+        for a in np.flatnonzero((trips != self._trips_prev) | (wd != self._wd_prev)):
+            if trips[a] != self._trips_prev[a]:
+                self._emcy(D.EMCY_TIMEOUT, int(a), D.FMI_TIMEOUT)
+            if not wd[a]:
+                self._emcy(D.EMCY_RESET, int(a), D.FMI_TIMEOUT)
+        self._wd_prev, self._trips_prev = wd, trips
         faults = set(svc.faults.active)
         for fid in faults - self._faults_prev:
             f = svc.faults.active.get(fid)

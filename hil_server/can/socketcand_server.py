@@ -19,7 +19,8 @@ python-can compares each handshake reply with one ``recv(256)``, so frames to a 
 and only sent after a short pause following its ``rawmode`` reply. python-can's client leaves Nagle
 on; we ACK every read at once (TCP_QUICKACK) so its second small frame of a tick is not held for our
 delayed ACK (40-200 ms). Unparseable input is counted and skipped; a client that cannot keep up has
-frames dropped (counted) rather than growing memory.
+frames dropped (counted) rather than growing memory; a client whose frames the bridge drops as flood
+is read more slowly (TCP back-pressure), so a flood on one connection cannot starve the event loop.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ log = logging.getLogger("hydrohil.socketcand")
 
 HANDSHAKE_QUIET_S = 0.1
 MAX_BUFFERED = 256 * 1024   # bytes queued in a client's transport before frames are dropped
+FLOOD_PAUSE_S = 1.0 / 20000.0   # reading from a client pauses this long per frame the bridge dropped as flood
+READ_BYTES = 4096           # per read (~100 frames): every client gets its turn every few hundred microseconds
 
 
 def format_frame(msg: can.Message) -> bytes:
@@ -67,6 +70,7 @@ class _Client:
         self.raw = False
         self.pending: list[bytes] = []   # frames held during the handshake pause
         self.flushing = False
+        self.flooded = 0                  # frames of the current read the bridge dropped as flood
         sock = writer.get_extra_info("socket")
         self._sock = sock
         self._quickack = getattr(socket, "TCP_QUICKACK", None)
@@ -94,7 +98,7 @@ class _Client:
         buf = ""
         try:
             while True:
-                data = await self.reader.read(65536)
+                data = await self.reader.read(READ_BYTES)
                 if not data:
                     break
                 if self._quickack is not None and self._sock is not None:
@@ -103,6 +107,7 @@ class _Client:
                     except OSError:
                         pass
                 buf += data.decode("ascii", errors="replace")
+                self.flooded = 0
                 pos = 0
                 while True:
                     start = buf.find("<", pos)
@@ -120,6 +125,10 @@ class _Client:
                     self._handle(buf[start + 1:end].strip())
                     pos = end + 1
                 buf = buf[pos:]
+                if self.flooded:
+                    # a flooding client is read no faster than its frames are admitted: TCP then holds
+                    # the sender back, so the flood costs this loop (REST, the other clients) nothing
+                    await asyncio.sleep(self.flooded * FLOOD_PAUSE_S)
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         finally:
@@ -142,12 +151,23 @@ class _Client:
                 self.server.count("malformed")
             return
         if body.startswith("send "):
+            admit = self.server.admit
+            if admit is not None:     # the flood budget first: a dropped frame is never decoded
+                cid_s = body[5:].lstrip().partition(" ")[0]
+                try:
+                    cid = int(cid_s, 16)
+                except ValueError:
+                    self.server.count("malformed")
+                    return
+                if not admit(cid, len(cid_s) > 3):
+                    self.flooded += 1
+                    return
             try:
                 msg = parse_send(body)
             except ValueError:
                 self.server.count("malformed")
                 return
-            self.server._from_client(self, msg)
+            self.server._from_client(self, msg, admit is not None)
         elif body == "echo":
             self.write(b"< echo >")
         else:
@@ -173,6 +193,7 @@ class SocketcandServer:
         self.counters: dict[str, int] = {}
         self.clients: list[_Client] = []
         self.on_frame = None
+        self.admit = None   # set by the bridge: admit(arbitration_id, extended) -> bool, before decoding
         self._server: asyncio.AbstractServer | None = None
 
     def count(self, key: str, n: int = 1) -> None:
@@ -192,9 +213,12 @@ class SocketcandServer:
         if client in self.clients:
             self.clients.remove(client)
 
-    def _from_client(self, client: _Client, msg: can.Message) -> None:
-        admitted = self.on_frame(msg) is not False   # a frame dropped as flood is not forwarded either
-        if admitted and len(self.clients) > 1:
+    def _from_client(self, client: _Client, msg: can.Message, admitted: bool = False) -> None:
+        ok = (self.on_frame(msg, True) if admitted else self.on_frame(msg)) is not False
+        if not ok:                 # a frame dropped as flood is not forwarded either
+            client.flooded += 1
+            return
+        if len(self.clients) > 1:
             line = format_frame(msg)
             for c in self.clients:
                 if c is not client:

@@ -68,6 +68,7 @@ class EngineLoop:
         self._cmd_flat = self._cmd.reshape(-1)
         self._u = np.zeros(na)
         self._wd = np.zeros(na)
+        self._wd_trips = np.zeros(na)
         self._sensed_idx = np.flatnonzero([j.sensed for j in ctx.spec.joints]).astype(np.int64)
         self._n_dof = ctx.XQ.shape[1]
         self._cols = plant_columns()
@@ -93,7 +94,8 @@ class EngineLoop:
         A.read_consistent(scratch_sync, S.W_CMD_SEQ, self.block.cmd_flat, self._cmd_flat, 1)
         A.load_relaxed(scratch_sync, S.W_CTL)
         A.fetch_add(scratch_sync, S.W_BEAT, 1)
-        apply_commands(self._cmd, self._u.copy(), self._wd.copy(), 0.0, True, 0.0, 0.0, self.watchdog_s)
+        apply_commands(self._cmd, self._u.copy(), self._wd.copy(), self._wd_trips.copy(), 0.0, True, 0.0, 0.0,
+                       self.watchdog_s)
 
     # ---- one tick -------------------------------------------------------------------------------
     def _read_commands(self) -> None:
@@ -101,7 +103,7 @@ class EngineLoop:
         if not A.read_consistent(b.sync, S.W_CMD_SEQ, b.cmd_flat, self._cmd_flat, 1000):
             b.stats[S.T_CMD_READ_FAILS] += 1.0   # a writer stuck mid-update: keep the last commands
         hold = 1.0 if (b.estop[0] != 0.0 or self.diverged) else 0.0
-        trips = apply_commands(self._cmd, self._u, self._wd, hold, self.mode == "realtime",
+        trips = apply_commands(self._cmd, self._u, self._wd, self._wd_trips, hold, self.mode == "realtime",
                                time.monotonic(), self.ctx.time, self.watchdog_s)
         if trips:
             b.stats[S.T_WD_TRIPS] += trips
@@ -152,7 +154,7 @@ class EngineLoop:
     def _publish(self) -> None:
         ctx = self.ctx
         publish(self.block.sync, self.block.state, self._cols, self._n_dof, ctx.XQ, ctx.XS, ctx.XG, self._cmd,
-                self._u, self._wd, float(self.tick_count), time.time(), float(S.MODES.index(self.mode)),
+                self._u, self._wd, self._wd_trips, float(self.tick_count), time.time(), float(S.MODES.index(self.mode)),
                 float(self.block.estop[0]), 1.0 if self.diverged else 0.0)
 
     # ---- statistics ---------------------------------------------------------------------------

@@ -103,6 +103,10 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
         loop.handlers = ControlHandler(loop, conn, cfg)
         if cfg.mode != "realtime":
             _normal_priority()   # only realtime has deadlines; a long lockstep step must not starve the host
+        import gc
+
+        gc.collect()
+        gc.freeze()   # a full collection of the start-up heap in the loop would be a ~50 ms overrun
         conn.send((None, "ready", {"realtime_priority": rt, "priority_note": note, "pid": os.getpid()}))
         loop.run()
     except Exception as exc:  # report start-up failures to the service instead of dying silently

@@ -19,8 +19,8 @@ _NJ = dict(cache=True, nogil=True)
 
 C_VOLT, C_SOURCE, C_T_WALL, C_T_SIM = S.C_VOLT, S.C_SOURCE, S.C_T_WALL, S.C_T_SIM
 SRC_CAN = S.SRC_CAN
-A_U_REQ, A_U, A_SENS_V, A_ANGLE, A_P_A, A_P_B, A_SPOOL, A_WATCHDOG, A_SOURCE = (
-    S.A_U_REQ, S.A_U, S.A_SENS_V, S.A_ANGLE, S.A_P_A, S.A_P_B, S.A_SPOOL, S.A_WATCHDOG, S.A_SOURCE)
+A_U_REQ, A_U, A_SENS_V, A_ANGLE, A_P_A, A_P_B, A_SPOOL, A_WATCHDOG, A_SOURCE, A_WD_TRIPS = (
+    S.A_U_REQ, S.A_U, S.A_SENS_V, S.A_ANGLE, S.A_P_A, S.A_P_B, S.A_SPOOL, S.A_WATCHDOG, S.A_SOURCE, S.A_WD_TRIPS)
 S_TICK, S_TIME, S_WALL, S_MODE, S_ESTOP, S_P_SUPPLY, S_ALIVE, S_DIVERGED = (
     S.S_TICK, S.S_TIME, S.S_WALL, S.S_MODE, S.S_ESTOP, S.S_P_SUPPLY, S.S_ALIVE, S.S_DIVERGED)
 W_STATE_SEQ, W_REC_ROWS = S.W_STATE_SEQ, S.W_REC_ROWS
@@ -41,11 +41,11 @@ def plant_columns() -> np.ndarray:
 
 
 @njit(**_NJ)
-def apply_commands(cmd, u, wd, hold_neutral, age_wall, now_wall, t_sim, watchdog_s):
+def apply_commands(cmd, u, wd, wd_trips, hold_neutral, age_wall, now_wall, t_sim, watchdog_s):
     """Plant input ``u`` from the command table: CAN commands older than the watchdog timeout and
     everything while ``hold_neutral`` (E-STOP, diverged plant) go to 0 V. ``age_wall``: 1 measures
-    age in wall time (realtime), 0 in simulated time. Returns the number of joints whose watchdog
-    newly tripped."""
+    age in wall time (realtime), 0 in simulated time. Counts new trips per joint in ``wd_trips``
+    and returns their number."""
     trips = 0
     for a in range(cmd.shape[0]):
         v = cmd[a, C_VOLT]
@@ -57,6 +57,7 @@ def apply_commands(cmd, u, wd, hold_neutral, age_wall, now_wall, t_sim, watchdog
                 v = 0.0
                 if wd[a] == 0.0:
                     trips += 1
+                    wd_trips[a] += 1.0
         wd[a] = tripped
         if hold_neutral != 0.0:
             v = 0.0
@@ -65,7 +66,7 @@ def apply_commands(cmd, u, wd, hold_neutral, age_wall, now_wall, t_sim, watchdog
 
 
 @njit(**_NJ)
-def publish(sync, state, cols, n_dof, XQ, XS, XG, cmd, u, wd, tick, wall, mode, estop, diverged):
+def publish(sync, state, cols, n_dof, XQ, XS, XG, cmd, u, wd, wd_trips, tick, wall, mode, estop, diverged):
     """Write the state snapshot under its seqlock."""
     A.write_begin(sync, W_STATE_SEQ)
     state[S_TICK] = tick
@@ -88,6 +89,7 @@ def publish(sync, state, cols, n_dof, XQ, XS, XG, cmd, u, wd, tick, wall, mode, 
         state[o + A_U] = u[a]
         state[o + A_SOURCE] = cmd[a, C_SOURCE]
         state[o + A_WATCHDOG] = wd[a]
+        state[o + A_WD_TRIPS] = wd_trips[a]
         state[o + A_SENS_V] = XS[a, cols[K_SENS_V]]
         state[o + A_ANGLE] = XS[a, cols[K_SENS_ANGLE]]
         state[o + A_P_A] = XS[a, cols[K_P_A]]
