@@ -9,6 +9,7 @@ on a node that has none): that first task is slower, and ``Outcome.task['first']
 
 from __future__ import annotations
 
+import socket
 import time
 
 import ray
@@ -16,6 +17,34 @@ from ray.exceptions import RayError, RayTaskError
 
 from . import BackendError, Outcome, run_task
 from .fingerprint import code_fingerprint
+
+
+CONNECT_TIMEOUT_S = 10.0    # Ray itself retries an unreachable address for many minutes
+
+
+def _check_reachable(address: str) -> str:
+    """The cluster's host:port, checked to accept a connection (Ray would wait for it, not fail)."""
+    target = address.removeprefix("ray://")
+    if target == "auto":
+        try:
+            from ray._private.services import canonicalize_bootstrap_address
+        except ImportError:        # that helper moved: let ray.init resolve 'auto' itself
+            return address
+        try:
+            target = canonicalize_bootstrap_address("auto")
+        except ConnectionError as exc:
+            raise BackendError(f"--address auto: no running Ray cluster on this machine ({exc}); start one with "
+                               f"'ray start --head', or leave --address out for a local instance") from None
+    host, sep, port = target.rpartition(":")
+    if not sep or not port.isdigit():
+        raise BackendError(f"--address {address!r}: expected HOST:PORT (the address 'ray start --head' prints), "
+                           f"ray://HOST:PORT or auto")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise BackendError(f"--address {address}: no Ray cluster answers at {host}:{port} ({exc.strerror or exc}); "
+                           f"start one with 'ray start --head', or leave --address out for a local instance") from None
+    return address
 
 
 def _remote_task(fingerprint: str, fn, shared, item):
@@ -37,7 +66,7 @@ class RayBackend:
                 if address in (None, "", "local"):
                     ray.init(address="local", num_cpus=workers or None, **kw)
                 else:
-                    ray.init(address=address, **kw)
+                    ray.init(address=_check_reachable(address), **kw)
             except (ConnectionError, RuntimeError, ValueError) as exc:
                 raise BackendError(f"--address {address}: no Ray cluster to connect to ({exc}); start one with "
                                    f"'ray start --head', or leave --address out for a local instance") from None
