@@ -100,7 +100,8 @@ class RayBackend:
                     try:
                         value, task = ray.get(r)
                     except RayTaskError as exc:       # the task raised: its own exception, as raised there
-                        yield Outcome(item, error=exc.as_instanceof_cause(), seconds=time.perf_counter() - t0)
+                        cause = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else exc
+                        yield Outcome(item, error=cause, seconds=time.perf_counter() - t0)
                     except RayError as exc:           # the worker died or the task was lost
                         yield Outcome(item, error=exc, seconds=time.perf_counter() - t0)
                     else:
