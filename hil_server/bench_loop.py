@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -25,12 +24,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _bare_loop(duration: float, rate: float, out) -> None:
@@ -89,51 +82,51 @@ while time.perf_counter() - start < seconds:
             break
 el = time.perf_counter() - start
 bus.shutdown()
-print(json.dumps({"tx_fps": sent / el, "rx_fps": rx / el}))
+print(json.dumps({"tx_fps": sent / el, "rx_fps": rx / el, "sent": sent, "received": rx}))
 """
 
 
-def server_under_load(duration: float, robot: str = "hydrolek", rps: float = 500.0) -> dict:
-    import httpx
-
-    port, can_port = _free_port(), _free_port()
+def feedback_rate_for(robot: str) -> float:
+    """The cyclic feedback rate that sends ~1 kHz of frames (JointFeedback + JointPressure per joint)."""
     from sim_core.model.spec import load_robot
 
-    n_joints = len(load_robot(robot).joint_names)
-    fb_rate = 1000.0 / (2 * n_joints)   # JointFeedback + JointPressure per joint: ~1 kHz of frames out
-    env = dict(os.environ)
-    srv = subprocess.Popen([sys.executable, "-m", "sim_core.cli", "serve", "--robot", robot, "--port", str(port),
-                            "--can", f"socketcand:{can_port}", "--viewer-port", "0", "--feedback-rate", f"{fb_rate:g}",
-                            "--recordings", "/tmp/hydrohil-bench-recordings", "--log-level", "warning"],
-                           cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    url = f"http://127.0.0.1:{port}"
-    try:
-        for _ in range(600):
-            try:
-                if httpx.get(url + "/api/v1/health", timeout=1).json()["engine_alive"]:
-                    break
-            except (httpx.HTTPError, ValueError, KeyError):
-                time.sleep(0.2)
-        time.sleep(2.0)
-        from .can.dbc import dbc_path
+    return 1000.0 / (2 * len(load_robot(robot).joint_names))
 
-        before = httpx.get(url + "/api/v1/state").json()["loop"]
-        rest = subprocess.Popen([sys.executable, "-m", "hil_server.loadgen", "127.0.0.1", str(port), str(rps), str(duration)],
-                                stdout=subprocess.PIPE, text=True, cwd=ROOT)
-        canp = subprocess.Popen([sys.executable, "-c", CAN_LOAD, str(can_port), str(dbc_path(robot)), str(duration)],
-                                stdout=subprocess.PIPE, text=True)
-        rest_out, _ = rest.communicate(timeout=duration + 120)
-        can_out, _ = canp.communicate(timeout=duration + 120)
-        after = httpx.get(url + "/api/v1/state").json()["loop"]
-        health = httpx.get(url + "/api/v1/health").json()
-    finally:
-        srv.terminate()
-        srv.wait(30)
+
+def start_load(srv, duration: float, rps: float) -> tuple[subprocess.Popen, subprocess.Popen]:
+    """A REST client process (``rps`` requests/s, 1 in 5 a PUT) and a CAN controller process (1 kHz of
+    ValveCommand frames in, reading every frame out) against ``srv`` for ``duration`` s."""
+    from .can.dbc import dbc_path
+
+    rest = subprocess.Popen([sys.executable, "-m", "hil_server.loadgen", "127.0.0.1", str(srv.port), str(rps),
+                             str(duration)], stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    canp = subprocess.Popen([sys.executable, "-c", CAN_LOAD, str(srv.can_port), str(dbc_path(srv.robot)), str(duration)],
+                            stdout=subprocess.PIPE, text=True)
+    return rest, canp
+
+
+def finish_load(rest: subprocess.Popen, canp: subprocess.Popen, timeout: float) -> tuple[dict, dict]:
+    rest_out, _ = rest.communicate(timeout=timeout)
+    can_out, _ = canp.communicate(timeout=timeout)
+    return json.loads(rest_out), json.loads(can_out)
+
+
+def server_under_load(duration: float, robot: str = "hydrolek", rps: float = 500.0) -> dict:
+    from .launcher import ServerProcess
+
+    with ServerProcess("--feedback-rate", f"{feedback_rate_for(robot):g}", "--log-level", "warning", robot=robot,
+                       can="socketcand", workdir="/tmp/hydrohil-bench") as srv:
+        time.sleep(2.0)
+        before = srv.rest.state()["loop"]
+        rest, canp = start_load(srv, duration, rps)
+        rest_res, can_res = finish_load(rest, canp, duration + 120)
+        after = srv.rest.state()["loop"]
+        health = srv.rest.health()
     ticks = after["ticks"] - before["ticks"]
     overruns = after["overruns"] - before["overruns"]
     return {"robot": robot, "ticks": ticks, "overruns": overruns, "lateness_us": after["lateness_us"],
             "realtime_priority": health["realtime_priority"], "realtime_note": health["realtime_note"],
-            "rest": json.loads(rest_out), "can": json.loads(can_out), "feedback_rate_hz": fb_rate}
+            "rest": rest_res, "can": can_res, "feedback_rate_hz": feedback_rate_for(robot)}
 
 
 def run(duration: float = 10.0, robot: str = "hydrolek") -> dict:

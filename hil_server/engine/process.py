@@ -90,6 +90,7 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
     from .loop import EngineLoop
 
     block = S.SharedBlock(layout, name=shm_name)
+    block.prefault()   # map every page now, not with a page fault inside a tick (the recording ring: ~12 MB)
     try:
         spec = pickle.loads(spec_blob)
         plant = Plant(spec)

@@ -161,6 +161,10 @@ class SharedBlock:
     def beat(self) -> int:
         return int(A.load_relaxed(self.sync, W_BEAT))
 
+    def prefault(self) -> None:
+        """Touch every page of the block (read), so that none faults in later."""
+        float(self._buf[::512].sum())
+
     def reset_for_engine(self) -> None:
         """Before a (re)started engine attaches: no writer is mid-update, nothing is alive yet."""
         for w in (W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT):
