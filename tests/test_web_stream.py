@@ -83,3 +83,31 @@ def test_panel_follows_the_plant(hydrolek):
     # the plot history carries plant time and commands
     t, v = panel.history.series("j3")
     assert t.size > 20 and np.all(np.diff(t) > 0) and np.nanmin(v[0]) == pytest.approx(-0.75)
+
+
+def test_the_monitor_shows_a_dead_engine_in_process_and_remotely(tmp_path):
+    """The engine is killed: the in-process panel says ENGINE DOWN with the reason and no longer
+    draws a state; a remote link loses the stream and reports the engine's state from /health."""
+    import os
+    import signal
+
+    from web.links import RemoteLink
+
+    s = InProcessServer("hydrolek", tmp_path, engine_restart="never")
+    link = None
+    try:
+        panel = s.viewer.panel
+        link = RemoteLink(s.url)
+        wait_for(lambda: link.latest() is not None, 10, "the remote stream")
+        os.kill(s.svc.supervisor.engine.pid, signal.SIGKILL)
+        wait_for(lambda: "ENGINE DOWN" in panel.status.content and "SIGKILL" in panel.status.content, 5,
+                 "the panel's engine-down badge and reason")
+        assert "SIGKILL" in panel.warnings.content          # the warning box of the panel
+        assert s.viewer.link.latest() is None                # nothing shown as if it were the plant
+        wait_for(lambda: link.latest() is None and link.status()["engine"].get("state") == "down", 10,
+                 "the remote link to report the engine down")
+        assert not link.status()["connected"]
+    finally:
+        if link is not None:
+            link.close()
+        s.close()

@@ -97,11 +97,12 @@ class ViewProcess:
     def __init__(self, url: str, tmp: Path, *, token: str | None = None):
         self.port = free_port()
         cmd = [sys.executable, "-m", "sim_core.cli", "view", "--url", url, "--port", str(self.port)]
+        env = {k: v for k, v in os.environ.items() if k != "HYDROHIL_TOKEN"}
         if token:
-            cmd += ["--token", token]
+            env["HYDROHIL_TOKEN"] = token     # not on the command line, where ps shows it
         self.log_path = tmp / f"view-{self.port}.log"
         self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT,
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=self.log, stderr=subprocess.STDOUT, env=env,
                                      preexec_fn=die_with_parent)
 
         def ready():

@@ -10,8 +10,11 @@ def register(sub):
                                     "(REST + WebSocket)")
     p.add_argument("--url", default="http://127.0.0.1:8000", help="the server's REST address (default %(default)s)")
     p.add_argument("--port", type=int, default=8080, help="port of this monitor's web page (default %(default)s)")
-    p.add_argument("--host", default="127.0.0.1", help="address this monitor binds (default loopback)")
-    p.add_argument("--token", help="bearer token of the server (needed for commands when it has one)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address this monitor binds (default loopback; beyond it a browser must enter the token "
+                        "before the panel commands)")
+    p.add_argument("--token", help="bearer token of the server (visible in ps: prefer HYDROHIL_TOKEN or --token-file)")
+    p.add_argument("--token-file", metavar="FILE", help="read the server's bearer token from the first line of FILE")
     p.add_argument("--rate", type=float, default=None, help="render rate in Hz (default 40)")
     p.add_argument("--log-level", default="info")
     p.set_defaults(func=run)
@@ -24,6 +27,8 @@ def run(args) -> int:
 
     from sim_core.cli import CliError
 
+    from hil_server.security import SecurityError, is_loopback, resolve_token
+
     from .links import LinkError, RemoteLink
     from .viewer import DEFAULT_RATE_HZ, Viewer
 
@@ -35,8 +40,17 @@ def run(args) -> int:
     sys.setswitchinterval(0.0005)
     rate = args.rate or DEFAULT_RATE_HZ
     try:
+        token, warnings = resolve_token(args.token, args.token_file)
+    except SecurityError as exc:
+        raise CliError(str(exc)) from None
+    if not is_loopback(args.host):
+        warnings.append(f"monitor on {args.host}: a browser must enter the token before its panel commands"
+                        + ("" if token else " (no token given: read-only for everyone)"))
+    for w in warnings:
+        log.warning("%s", w)
+    try:
         # the stream runs faster than the renderer, so (almost) every frame has a fresh state
-        link = RemoteLink(args.url, args.token, rate_hz=min(1.5 * rate, 250.0))
+        link = RemoteLink(args.url, token, rate_hz=min(1.5 * rate, 250.0))
     except LinkError as exc:
         raise CliError(str(exc)) from None
     try:
