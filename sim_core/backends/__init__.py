@@ -71,7 +71,7 @@ def open_backend(name: str, *, address: str | None = None, workers: int = 0) -> 
     raise BackendError(f"--backend {name!r}: expected one of {', '.join(BACKENDS)}")
 
 
-_TASKS_RUN = 0
+_TASKS_RUN = {"pid": None, "n": 0}     # per process: a forked worker starts its own count
 
 
 def run_task(fn, shared, item) -> tuple[Any, dict]:
@@ -81,9 +81,10 @@ def run_task(fn, shared, item) -> tuple[Any, dict]:
     import socket
     import time
 
-    global _TASKS_RUN
-    first = _TASKS_RUN == 0
-    _TASKS_RUN += 1
+    if _TASKS_RUN["pid"] != os.getpid():
+        _TASKS_RUN.update(pid=os.getpid(), n=0)
+    first = _TASKS_RUN["n"] == 0
+    _TASKS_RUN["n"] += 1
     t0 = time.perf_counter()
     value = fn(shared, item)
     return value, {"seconds": time.perf_counter() - t0, "first": first, "worker": f"{socket.gethostname()}:{os.getpid()}"}
