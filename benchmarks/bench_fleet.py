@@ -66,11 +66,14 @@ def run_config(backend_name: str, workers: int, paths, out: Path) -> dict:
     opts = FleetOptions(load_robot("hydrolek"), ReadOptions())
     res = run_fleet(paths, opts, out, backend_factory=lambda: backend)
     n = sum(r["status"] == "diagnosed" for r in res.rows)
+    if not n:
+        raise SystemExit(f"{backend_name} x{workers}: no record was diagnosed; first error: {res.failed[0]['error']}")
     tasks = [o.task["seconds"] for o in res.outcomes if o.task]
     waits = [o.seconds - o.task["seconds"] for o in res.outcomes if o.task]
     first = [o.task["seconds"] for o in res.outcomes if o.task.get("first")]
     later = [o.task["seconds"] for o in res.outcomes if o.task and not o.task.get("first")]
-    return {"backend": backend_name, "workers": workers, "records": len(paths), "diagnosed": n,
+    errors = [r["error"] for r in res.failed]
+    return {"errors": errors, "backend": backend_name, "workers": workers, "records": len(paths), "diagnosed": n,
             "failed": len(res.failed), "startup_s": startup, "wall_s": res.wall_s,
             "records_per_hour": n / res.wall_s * 3600, "records_per_hour_with_startup": n / (res.wall_s + startup) * 3600,
             "task_s_mean": statistics.mean(tasks), "overhead_s_mean": statistics.mean(waits),
@@ -126,7 +129,8 @@ def main():
                   f"{r['startup_s']:.1f} s start-up), {r['wall_s']:.0f} s wall, task {r['task_s_mean']:.1f} s mean, "
                   f"driver waited {r['overhead_s_mean'] * 1e3:.0f} ms more per record (max {r['overhead_s_max'] * 1e3:.0f}), "
                   f"first task per worker {_s(r['first_task_s_mean'])} vs later {_s(r['later_task_s_mean'])}, "
-                  f"load {r['load_average']:.2f}", flush=True)
+                  f"load {r['load_average']:.2f}" + (f"; {r['failed']} FAILED: {r['errors'][0]}" if r["failed"] else ""),
+                  flush=True)
     names = [p.stem for p in paths]
     by = {(r["backend"], r["workers"]): r for r in results}
     print("\nsummary (reference: the local pool at the same worker count, measured in this run)")

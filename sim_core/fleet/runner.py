@@ -2,8 +2,9 @@
 
 The driver (this process) checks what changed, reads each record as it submits it (a bad column fails
 that record, naming the file), and writes each result as it comes: the record's files under
-``DIR/<record>/``, the input key last, and fleet.json/fleet.csv after every record, so a run that is
-stopped keeps what it finished and the next run does the rest. index.html is written at the end.
+``DIR/<record>/``, the input key last, and fleet.json/fleet.csv every few seconds, so a run that is
+stopped keeps what it finished and the next run does the rest. Everything is written again at the end,
+index.html too.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from .rows import record_row
 from .summary import fleet_data, write_summary
 from .task import RecordJob, Shared, diagnose_record
 
+SUMMARY_EVERY_S = 10.0      # fleet.json/csv rewritten at most this often while records finish (and at the end)
 RECORD_FILES = ("diagnosis.json", "report.html", "report.md", "extended.toml", "error.txt", INPUT_FILE)
 
 
@@ -69,24 +71,9 @@ def _clear(record_dir: Path) -> None:
         (record_dir / name).unlink(missing_ok=True)
 
 
-def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path, *,
-              backend_factory: Callable[[], object], log: Callable[[str], None] = lambda msg: None) -> FleetResult:
-    """Diagnose ``records`` into ``out_dir``; ``backend_factory`` is called only when a record needs it."""
-    from ..identification.record import load_record
-
-    t_start = time.perf_counter()
-    paths = [Path(p) for p in records]
-    seen: dict[Path, str] = {}
-    for p in paths:
-        r = p.resolve()
-        if r in seen:
-            raise ValueError(f"{p}: given twice (as {seen[r]})")
-        seen[r] = str(p)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    names = record_names(paths)
-    spec = opts.spec
-    spec_hash, opt_hash = spec_digest(spec), opts.digest()
+def _plan(paths: list[Path], names: list[str], opts: FleetOptions, out_dir: Path):
+    """Each record's date and input key; the unchanged ones get their stored row, the others are to do."""
+    spec_hash, opt_hash = spec_digest(opts.spec), opts.digest()
     rows: list[dict | None] = [None] * len(paths)
     todo: list[tuple[int, dict, list[str]]] = []
     dates: list[str | None] = [None] * len(paths)
@@ -105,13 +92,38 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
         rdir = out_dir / name
         old = stored_key(rdir)
         report = "report.html" if opts.fmt == "html" else "report.md"
+        diag = None
         if old and old.get("key") == key and all((rdir / f).is_file() for f in ("diagnosis.json", report, "extended.toml")):
-            diag = json.loads((rdir / "diagnosis.json").read_text())
+            try:
+                diag = json.loads((rdir / "diagnosis.json").read_text())
+            except (OSError, ValueError):       # damaged since: diagnosed again
+                old = None
+        if diag is not None:
             rows[i] = record_row(name, str(p), dates[i], "unchanged", diag, seconds=old.get("seconds"),
                                  report=f"{name}/{report}", notes=notes[i])
         else:
             todo.append((i, key, changed_parts(old.get("key") if old else None, key)))
+    return rows, todo, dates, notes
 
+
+def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path, *,
+              backend_factory: Callable[[], object], log: Callable[[str], None] = lambda msg: None) -> FleetResult:
+    """Diagnose ``records`` into ``out_dir``; ``backend_factory`` is called only when a record needs it."""
+    from ..identification.record import load_record
+
+    t_start = time.perf_counter()
+    paths = [Path(p) for p in records]
+    seen: dict[Path, str] = {}
+    for p in paths:
+        r = p.resolve()
+        if r in seen:
+            raise ValueError(f"{p}: given twice (as {seen[r]})")
+        seen[r] = str(p)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    names = record_names(paths)
+    spec = opts.spec
+    rows, todo, dates, notes = _plan(paths, names, opts, out_dir)
     unchanged = [r["record"] for r in rows if r is not None and r["status"] == "unchanged"]
     if unchanged:
         log(f"{len(unchanged)} record(s) unchanged since the last run, not diagnosed again: "
@@ -135,6 +147,8 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
         return out
 
     written: dict[str, Path] = {}
+    outcomes_iter = None
+    last_summary = [time.perf_counter()]
     try:
         if todo:
             backend = backend_factory()
@@ -165,7 +179,8 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
                     yield RecordJob(names[i], rec)
 
             shared = Shared(spec, opts.effects, opts.fmt)
-            for o in backend.map(diagnose_record, shared, jobs()):
+            outcomes_iter = backend.map(diagnose_record, shared, jobs())
+            for o in outcomes_iter:
                 outcomes.append(o)
                 name = o.item.name
                 i, key, why = pending[name]
@@ -187,8 +202,12 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
                     rows[i] = record_row(name, str(paths[i]), dates[i], "diagnosed", diag, seconds=v["seconds"],
                                          report=f"{name}/{report}", reason=why, notes=notes[i])
                 progress.finished(name, _finish_text(rows[i]))
-                summary(final=False)
+                if time.perf_counter() - last_summary[0] >= SUMMARY_EVERY_S:
+                    summary(final=False)
+                    last_summary[0] = time.perf_counter()
     finally:
+        if outcomes_iter is not None:
+            outcomes_iter.close()          # tasks still in flight are cancelled
         if backend is not None:
             backend.close()
         written = summary(final=True)
