@@ -72,11 +72,5 @@ class HilClient:
     def reset(self, seed: int | None = None, *, timeout: float = 30.0) -> dict:
         return self.request("POST", "/api/v1/reset", {} if seed is None else {"seed": int(seed)}, timeout=timeout)
 
-    def set_mode(self, mode: str) -> dict:
-        return self.request("PUT", "/api/v1/mode", {"mode": mode})
-
-    def step(self, ticks: int, *, timeout: float = 600.0) -> dict:
-        return self.request("POST", "/api/v1/step", {"ticks": int(ticks)}, timeout=timeout)
-
     def stream_url(self, rate_hz: float) -> str:
         return f"{self.ws_base}/api/v1/stream?rate={min(max(rate_hz, 1.0), 250.0):g}"

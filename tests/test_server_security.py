@@ -15,7 +15,7 @@ import websockets
 from hil_server.security import is_loopback, resolve_token
 
 from server_helpers import ServerProcess, free_port
-from web_helpers import ViserProbe, wait_for
+from web_helpers import ViserProbe, get_or_none, wait_for
 
 TOKEN = "t0ken-for-tests"
 
@@ -76,7 +76,7 @@ def test_insecure_is_loud_in_the_log_health_metrics_and_viewer(tmp_path):
             assert h["insecure"] and any(w.startswith("INSECURE") for w in h["warnings"])
             assert "hydrohil_insecure 1" in c.get("/metrics").text
         assert "WARNING INSECURE" in srv.log_text()
-        wait_for(lambda: _get(f"http://127.0.0.1:{vport}/"), 60, "the viewer")
+        wait_for(lambda: get_or_none(f"http://127.0.0.1:{vport}/"), 60, "the viewer")
         probe = ViserProbe(vport)
         try:
             wait_for(lambda: any("INSECURE" in str(m.get("updates", {}).get("content", "")) or
@@ -86,13 +86,6 @@ def test_insecure_is_loud_in_the_log_health_metrics_and_viewer(tmp_path):
             probe.close()
     finally:
         srv.stop()
-
-
-def _get(url):
-    try:
-        return httpx.get(url, timeout=5)
-    except httpx.HTTPError:
-        return None
 
 
 def test_every_protected_endpoint_refuses_a_missing_or_wrong_token(tmp_path):
@@ -146,7 +139,7 @@ def test_the_viewer_websocket_refuses_foreign_origins(tmp_path):
     vport = free_port()
     srv = ServerProcess(robot="hydrolek", viewer_port=vport, tmp_path=tmp_path)
     try:
-        wait_for(lambda: _get(f"http://127.0.0.1:{vport}/"), 60, "the viewer")
+        wait_for(lambda: get_or_none(f"http://127.0.0.1:{vport}/"), 60, "the viewer")
         proto = [f"viser-v{viser.__version__}"]
         for origin in ("http://evil.example", f"http://evil.example:{vport}", "http://127.0.0.1:1"):
             with connect(f"ws://127.0.0.1:{vport}", subprotocols=proto, origin=origin, open_timeout=10) as ws:

@@ -9,14 +9,7 @@ import numpy as np
 import pytest
 
 from server_helpers import ServerProcess
-from web_helpers import WINDOW_S, ViewProcess, ViserProbe, frame_rate, free_port, wait_for
-
-
-def _get(url):
-    try:
-        return httpx.get(url, timeout=5)
-    except httpx.HTTPError:
-        return None
+from web_helpers import WINDOW_S, ViewProcess, ViserProbe, frame_rate, free_port, get_or_none, wait_for
 
 
 def test_serve_starts_the_viewer(tmp_path):
@@ -24,7 +17,7 @@ def test_serve_starts_the_viewer(tmp_path):
     srv = ServerProcess(robot="harvester", tmp_path=tmp_path, viewer_port=port)
     try:
         # REST is up; the viewer comes up beside it in the background
-        page = wait_for(lambda: _get(f"http://127.0.0.1:{port}/"), 60, "the viewer's page")
+        page = wait_for(lambda: get_or_none(f"http://127.0.0.1:{port}/"), 60, "the viewer's page")
         assert page.status_code == 200 and "<html" in page.text.lower()
         probe = ViserProbe(port)
         try:

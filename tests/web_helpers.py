@@ -31,6 +31,16 @@ def artifacts_dir() -> Path:
     return d
 
 
+def get_or_none(url: str):
+    """GET ``url``; None while nothing answers there (a server still starting)."""
+    import httpx
+
+    try:
+        return httpx.get(url, timeout=5)
+    except httpx.HTTPError:
+        return None
+
+
 def wait_for(pred, timeout: float, what: str, interval: float = 0.05):
     end = time.monotonic() + timeout
     while True:

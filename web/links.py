@@ -141,12 +141,6 @@ class RemoteLink:
         self._sender.start()
         self._health_thread.start()
 
-    def _request(self, method: str, path: str, body: dict | None = None):
-        try:
-            return self.client.request(method, path, body)
-        except ClientError as exc:
-            raise LinkError(str(exc)) from None
-
     def _mirror_parameters(self) -> None:
         """Take the server's cylinder mounts and command ranges (a --params file may change them)."""
         try:
@@ -272,7 +266,10 @@ class RemoteLink:
         with self._lock:
             if on:
                 self._pending.clear()  # nothing queued before the stop may follow it
-        self._request("PUT", "/api/v1/estop", {"engaged": bool(on)})
+        try:
+            self.client.estop(on)
+        except ClientError as exc:
+            raise LinkError(str(exc)) from None
 
     def close(self) -> None:
         self._stop.set()

@@ -11,7 +11,7 @@ OVERFLOW = -1
 
 
 class IdRateLimiter:
-    def __init__(self, rate: float = 20000.0, burst: float | None = None, max_ids: int = 4096):
+    def __init__(self, rate: float, burst: float | None = None, max_ids: int = 4096):
         self.rate = float(rate)                      # frames/s admitted per id
         self.burst = float(burst if burst is not None else max(1.0, rate / 10.0))
         self.max_ids = max_ids

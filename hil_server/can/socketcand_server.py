@@ -36,7 +36,7 @@ log = logging.getLogger("hydrohil.socketcand")
 
 HANDSHAKE_QUIET_S = 0.1
 MAX_BUFFERED = 256 * 1024   # bytes queued in a client's transport before frames are dropped
-FLOOD_PAUSE_S = 1.0 / 20000.0   # reading from a client pauses this long per frame the bridge dropped as flood
+FLOOD_PAUSE_S = 1.0 / 5000.0    # reading from a client pauses this long per frame the bridge dropped as flood
 READ_BYTES = 4096           # per read (~100 frames): every client gets its turn every few hundred microseconds
 
 
