@@ -52,7 +52,7 @@ class FleetResult:
     paths: dict[str, Path]
     wall_s: float
     backend: str | None
-    outcomes: list = field(default_factory=list)     # backends.Outcome of each diagnosed record
+    outcomes: list = field(default_factory=list)     # backends.Outcome per record sent (item: its name; no files)
 
     @property
     def failed(self) -> list[dict]:
@@ -181,10 +181,12 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
             shared = Shared(spec, opts.effects, opts.fmt)
             outcomes_iter = backend.map(diagnose_record, shared, jobs())
             for o in outcomes_iter:
-                outcomes.append(o)
                 name = o.item.name
                 i, key, why = pending[name]
                 v = o.value
+                outcomes.append(o)
+                o.item = name                  # what the caller keeps: timings, not records and files
+                o.value = {k: x for k, x in v.items() if k != "files"} if v else v
                 if o.error is not None:
                     fail(i, f"{type(o.error).__name__}: {o.error}", o.seconds)
                 elif not v["ok"]:
