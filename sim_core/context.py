@@ -117,20 +117,23 @@ class Context:
         return KIND_CLASS[self.spec.joints[a].kind].chamber_volumes(self.AP[a], th)
 
     def bulk_functions(self):
-        """(beta, f(p)): the oil's bulk modulus (Pa) and its pressure factor with the effects on."""
-        from .effects.bulk_modulus import BULK_PAIR, BULK_SCALE, BulkModulus
+        """(beta, G): the oil's bulk modulus (Pa) and G(p) = int_0^p p'/f(p') dp' (Pa^2), f the
+        pressure factor of the bulk modulus; compressed oil in a volume V stores V G(p) / beta."""
+        import math
+
         from .components.fluid import ATM, BETA
+        from .effects.bulk_modulus import BULK_PAIR, BULK_SCALE, BulkModulus
 
         GP = self.GP
         on = GP[BulkModulus.switch_column] != 0.0
+        pa, s, pair = GP[ATM], GP[BULK_SCALE], GP[BULK_PAIR]
 
-        def f(p):
+        def G(p):
             if not on:
-                return 1.0
-            pa = max(p + GP[ATM], 1e3)
-            return GP[BULK_SCALE] / (1.0 + GP[BULK_PAIR] / pa)
+                return 0.5 * p * p
+            return (0.5 * p * p + pair * (p - pa * math.log((p + pa) / pa))) / s
 
-        return GP[BETA], f
+        return GP[BETA], G
 
     # ---- parameters -------------------------------------------------------------------------
     def _relower(self) -> None:

@@ -57,7 +57,7 @@ def stored_energy(ctx) -> dict[str, float]:
     AP, GP, XS = ctx.AP, ctx.GP, ctx.XS
     out = {"kinetic": rb.kinetic_energy(q, qd), "gravity": rb.potential_energy(q), "oil": 0.0,
            "hose_flow": 0.0, "springs": stop_energy(ctx.DP, q)}
-    beta, bf = ctx.bulk_functions()
+    beta, G = ctx.bulk_functions()
     for a in range(AP.shape[0]):
         oil_done = False
         for eff in EFFECTS.values():
@@ -67,7 +67,7 @@ def stored_energy(ctx) -> dict[str, float]:
             va, vb = ctx.chamber_volumes(a)
             pa, pb = XS[a, P_A], XS[a, P_B]
             vh, bh = AP[a, HOSE_VOL], AP[a, HOSE_BETA]
-            out["oil"] += 0.5 * ((va / beta + vh / bh) * pa ** 2 / bf(pa) + (vb / beta + vh / bh) * pb ** 2 / bf(pb))
+            out["oil"] += (va / beta + vh / bh) * G(pa) + (vb / beta + vh / bh) * G(pb)
     if GP[PUMP_QMAX] > 0.0:
         out["oil"] += 0.5 * GP[SUPPLY_C] * ctx.XG[P_S] ** 2
     out["total"] = float(sum(out.values()))

@@ -1,3 +1,5 @@
+import math
+
 from numba import njit
 
 from ..components.base import Parameter
@@ -17,7 +19,8 @@ class BulkModulus(Effect):
 
     beta_e(p) = s beta / (1 + p_air / (p + p_atm)) in every chamber and hose. The hydraulic spring
     softens, most at low pressure: the hydraulic natural frequency drops, pressures build up more
-    slowly after a command, and the joint overshoots and rings more.
+    slowly after a command, and the joint overshoots and rings more. Oil compressed to p stores
+    V/beta int_0^p p'/f(p') dp' = V/(s beta) [p^2/2 + p_air (p - p_atm ln((p + p_atm)/p_atm))].
     """
 
     name = "bulk_modulus"
@@ -27,7 +30,7 @@ class BulkModulus(Effect):
         Parameter("scale", "-", "multiplier on the bulk modulus at high pressure", 0.5, 0.05, 2.0),
         Parameter("air_pressure", "Pa", "pressure scale of the entrained-air softening", 5e5, 0.0, 5e6),
     )
-    HOOKS = {"bulk": "air_softened"}
+    HOOKS = {"bulk": "air_softened", "compression_energy": "air_compression_energy"}
 
     @classmethod
     def lower_neutral(cls, lw, a):
@@ -54,3 +57,10 @@ def air_softened(p, GP):
     if pa < 1e3:
         pa = 1e3
     return GP[BULK_SCALE] / (1.0 + GP[BULK_PAIR] / pa)
+
+
+@njit(inline="always")
+def air_compression_energy(p, GP):
+    """G(p) = int_0^p p' / f(p') dp' (Pa^2) for f = s / (1 + p_air / (p + p_atm))."""
+    pa = GP[ATM]
+    return (0.5 * p * p + GP[BULK_PAIR] * (p - pa * math.log((p + pa) / pa))) / GP[BULK_SCALE]

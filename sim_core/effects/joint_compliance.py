@@ -4,7 +4,7 @@ from numba import njit
 
 from ..components.base import Parameter
 from ..components.labview_adaptation import CITATION_MARS_ND
-from ..kernel.layout import AP, XG_E_MECH, XS, col
+from ..kernel.layout import AP, XG_E_ACT, XG_E_MECH, XS, col
 from .base import CITE_CATALOG, Effect, clip_grid
 
 COMP_K, COMP_C, COMP_JA = AP.declare(
@@ -38,7 +38,7 @@ class JointCompliance(Effect):
     )
     HOOKS = {
         "actuator_motion": "actuator_side_motion", "actuator_motion_off": "follow_joint",
-        "coupling": "implicit_two_mass", "reference_coupling": "two_mass_derivative",
+        "coupling": "implicit_two_mass", "after_mechanics": "book_two_mass", "reference_coupling": "two_mass_derivative",
     }
     CONFUSIONS = {
         "line_dynamics": "pressures at the valve port and at the cylinder port, or a second record with another payload (a mechanical mode moves with the load)",
@@ -115,12 +115,22 @@ def implicit_two_mass(a, dof, h, tau_h, visc, q, qd, AP, XS, XG, energy):
     om = XS[a, OM_A]
     om_new = (om + h * (tau_h - k * (th - q[dof]) + c * qd[dof]) / ja) / (1.0 + h * (visc + c) / ja)
     th_new = th + h * om_new
-    if energy:
-        XG[XG_E_MECH] += h * visc * om_new * om_new
+    if energy:   # the hydraulic work goes into the actuator side; the seal friction is lost there
+        XG[XG_E_ACT] += h * tau_h * 0.5 * (om + om_new)
+        XG[XG_E_MECH] += h * visc * om_new * 0.5 * (om + om_new)
     XS[a, OM_A] = om_new
     XS[a, TH_A] = th_new
     link = k * (th_new - q[dof]) + c * (om_new - qd[dof])
-    return link, c, link
+    return link, c, 0.0     # the link force is internal to the two-mass joint: no actuator work on the link
+
+
+@njit(inline="always")
+def book_two_mass(a, dof, h, q, qd, qd_old, AP, XS, XG):
+    """Energy ledger: the compliance's damper acts between the two masses, c (om - qd)^2, not
+    against the ground as the generic joint ledger booked it (c qd_new vavg)."""
+    c = AP[a, COMP_C]
+    rel = XS[a, OM_A] - qd[dof]
+    XG[XG_E_MECH] += h * c * (rel * rel - qd[dof] * 0.5 * (qd[dof] + qd_old[dof]))
 
 
 @njit(inline="always")

@@ -54,12 +54,11 @@ class LineDynamics(Effect):
         if AP_[a, cls.switch_column] == 0.0:
             return False
         va, vb = ctx.chamber_volumes(a)
-        beta, bf = ctx.bulk_functions()
+        beta, G = ctx.bulk_functions()
         pa, pb = XS_[a, P_A], XS_[a, P_B]
         ua, ub = XS_[a, PH_A], XS_[a, PH_B]
         vh, bh = AP_[a, HOSE_VOL], AP_[a, HOSE_BETA]
-        out["oil"] += 0.5 * (va / (beta * bf(pa)) * pa ** 2 + vb / (beta * bf(pb)) * pb ** 2)
-        out["oil"] += 0.5 * vh / bh * (ua ** 2 / bf(ua) + ub ** 2 / bf(ub))
+        out["oil"] += (va * G(pa) + vb * G(pb)) / beta + vh / bh * (G(ua) + G(ub))
         out["hose_flow"] += 0.5 * AP_[a, HOSE_I] * (XS_[a, QH_A] ** 2 + XS_[a, QH_B] ** 2)
         return True
 

@@ -42,6 +42,8 @@ PHASES: tuple[Phase, ...] = (
     Phase("coupling", "a, dof, h, tau_h, visc, q, qd, AP, XS, XG, energy", "override", "f, dlin, work",
           "tau_h - visc * qd[dof], visc, tau_h",
           doc="force on the link (N m or N), its slope -d/dqd, and the actuator force for the work ledger"),
+    Phase("after_mechanics", "a, dof, h, q, qd, qd_old, AP, XS, XG", "notify",
+          doc="energy ledger only: after the joints moved (qd_old: velocities before the substep)"),
     Phase("joint_friction", "a, qd_dof, AP", "sum", "tf, slope",
           doc="friction on the joint (N m or N) and its slope d/dqd"),
     Phase("negative_gain", "kv, a, AP", "override", "kvn", "kv",
@@ -52,6 +54,8 @@ PHASES: tuple[Phase, ...] = (
           doc="flows leaving the chambers (m^3/s) and their slopes d/dp_own"),
     Phase("bulk", "p, GP", "override", "f", "1.0", scope="global",
           doc="multiplier on the oil's bulk modulus at gauge pressure p"),
+    Phase("compression_energy", "p, GP", "override", "g", "0.5 * p * p", scope="global",
+          doc="G(p) = int_0^p p'/f(p') dp' (Pa^2): compressed oil stores V G(p) / beta"),
     Phase("port_pressures", "a, pa, pb, AP, XS", "override", "ua, ub", "pa, pb",
           doc="pressures at the valve ports (Pa)"),
     Phase("pressures", "a, h, ua, ub, pa, pb, qva, dqva, qvb, dqvb, va, vb, qdisp_a, qdisp_b, "

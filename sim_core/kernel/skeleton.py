@@ -150,6 +150,9 @@ def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             qd[i] = 0.0
     ltl_factor(tree.parent, Lf)
     ltl_solve(tree.parent, Lf, rhs)  # rhs now holds qdd
+    if energy:
+        for i in range(n):
+            ws.qd0[i] = qd[i]
     for i in range(n):
         qd_new = qd[i] + h * rhs[i]
         if energy:
@@ -159,6 +162,11 @@ def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             XG[XG_E_ACT] += h * Tact[i] * vavg
         qd[i] = qd_new
         q[i] += h * qd_new
+    if energy:
+        for a in range(na):
+            dof = int(AP[a, AP_DOF])
+            if DP[dof, LOCKED] == 0.0:
+                fx_after_mechanics(a, dof, h, q, qd, ws.qd0, AP, XS, XG)
 
     # ---- 3. pressures -------------------------------------------------------------------------
     q_supply = 0.0
@@ -214,8 +222,8 @@ def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
             dpb = pb_n - pb
             if ideal_pump:
                 XG[XG_E_SUPPLY] += h * p_s * (q_pa_e + q_pb_e)
-            # a moving piston: d(V p^2 / 2 beta)/dt - p (Q - dV/dt) = p^2 dV/dt / (2 beta)
-            XG[XG_E_COMPRESS] += h * (pam * pam * dva / (2.0 * beta0 * fa) + pbm * pbm * dvb / (2.0 * beta0 * fb))
+            # a moving piston: d(V G(p) / beta)/dt - p (Q - dV/dt) = G(p) dV/dt / beta  (G = p^2/2 for constant beta)
+            XG[XG_E_COMPRESS] += h * (fx_compression_energy(pam, GP) * dva + fx_compression_energy(pbm, GP) * dvb) / beta0
             XG[XG_E_TANK] += h * p_t * (q_at_e + q_bt_e)
             XG[XG_E_VALVE] += h * (q_pa_e * (p_s - uam) + q_at_e * (uam - p_t) + q_pb_e * (p_s - ubm) + q_bt_e * (ubm - p_t))
             lka_e = lk_a + dlk_a * dpa
