@@ -71,6 +71,22 @@ def open_backend(name: str, *, address: str | None = None, workers: int = 0) -> 
     raise BackendError(f"--backend {name!r}: expected one of {', '.join(BACKENDS)}")
 
 
+_END = object()
+
+
+def top_up(pending: dict, items: Iterator, slots: int, submit: Callable[[Any], Any]) -> bool:
+    """Submit items until ``slots`` tasks are in flight (``pending``: handle -> (item, submit time));
+    False once ``items`` is exhausted."""
+    import time
+
+    while len(pending) < slots:
+        item = next(items, _END)
+        if item is _END:
+            return False
+        pending[submit(item)] = (item, time.perf_counter())
+    return True
+
+
 _TASKS_RUN = {"pid": None, "n": 0}     # per process: a forked worker starts its own count
 
 

@@ -13,7 +13,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from . import Outcome, run_task
+from . import Outcome, run_task, top_up
 
 _SHARED: list = []
 
@@ -42,19 +42,15 @@ class LocalBackend:
         methods = multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         it = iter(items)
-        exhausted = False
+        more = True
         while True:
             pool = ProcessPoolExecutor(max_workers=self.slots, mp_context=ctx, initializer=_install, initargs=(shared,))
             pending: dict = {}
             broken = False
             try:
                 while True:
-                    while not exhausted and len(pending) < self.slots:
-                        item = next(it, _END)
-                        if item is _END:
-                            exhausted = True
-                            break
-                        pending[pool.submit(_call, fn, item)] = (item, time.perf_counter())
+                    if more:
+                        more = top_up(pending, it, self.slots, lambda item: pool.submit(_call, fn, item))
                     if not pending:
                         break
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -77,7 +73,7 @@ class LocalBackend:
                         break
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
-            if not broken or exhausted:
+            if not broken or not more:
                 return
 
     @staticmethod
@@ -94,5 +90,3 @@ class LocalBackend:
     def close(self) -> None:
         pass
 
-
-_END = object()

@@ -15,7 +15,7 @@ import time
 import ray
 from ray.exceptions import RayError, RayTaskError
 
-from . import BackendError, Outcome, run_task
+from . import BackendError, Outcome, run_task, top_up
 from .fingerprint import code_fingerprint
 
 
@@ -83,15 +83,11 @@ class RayBackend:
         ref = ray.put(shared)
         it = iter(items)
         pending: dict = {}
-        exhausted = False
+        more = True
         try:
             while True:
-                while not exhausted and len(pending) < self.slots:
-                    item = next(it, _END)
-                    if item is _END:
-                        exhausted = True
-                        break
-                    pending[self._task.remote(self._fingerprint, fn, ref, item)] = (item, time.perf_counter())
+                if more:
+                    more = top_up(pending, it, self.slots, lambda item: self._task.remote(self._fingerprint, fn, ref, item))
                 if not pending:
                     return
                 ready, _ = ray.wait(list(pending), num_returns=1)
@@ -114,5 +110,3 @@ class RayBackend:
         if self.owned and ray.is_initialized():
             ray.shutdown()
 
-
-_END = object()
