@@ -112,6 +112,7 @@ def test_local_and_ray_give_identical_diagnoses(fleets):
         assert e["params"]["width"] == pytest.approx(truth, rel=0.1)
         lo, hi = e["ci95"]["width"]
         assert lo <= e["params"]["width"] <= hi
+        assert e["units"] == {"width": "V"}
         assert ra["fit_after"]["j2"] > ra["fit_before"]["j2"]
 
 
@@ -122,6 +123,8 @@ def test_progress_says_records_done_running_and_time_left(fleets):
     assert lines[0].startswith("[1/4] ") and lines[-1].startswith("[4/4] ")
     assert any("running: " in ln for ln in lines[:-1])
     assert any(" left" in ln for ln in lines[:-1])
+    for name in GOOD:       # the current record is said when it starts, before its (long) diagnosis ends
+        assert err.index(f"started {name} ") < err.index(f"] {name}: ")
     assert "records per hour" in err
 
 
@@ -163,7 +166,26 @@ def test_fleet_view_follows_the_growing_deadband(fleets):
         lines = {ln["record"]: ln for ln in csv.DictReader(fh)}
     for p in pts:
         assert float(lines[p["record"]]["deadband@j2.width"]) == pytest.approx(p["value"], rel=1e-7)
-    assert "width rises" in (fleets["local"][1] / "index.html").read_text()
+    assert view["units"] == {"width": "V"}
+    html = (fleets["local"][1] / "index.html").read_text()
+    assert "width rises" in html and " V per day" in html and "<th>width (V)</th>" in html
+    assert re.search(r"width=[0-9.]+ \[[0-9.]+, [0-9.]+\] V", html)
+
+
+def test_parameter_units_follow_the_joint_kind():
+    from sim_core.fleet.rows import unit, with_units
+    from sim_core.fleet.runner import prismatic_joints
+    from sim_core.model.spec import load_robot
+
+    assert prismatic_joints(load_robot(ROOT / "tests/data/import/slide/robot.toml")) == {"lift"}
+    assert prismatic_joints(load_robot("hydrolek")) == frozenset()
+    assert (unit("coulomb_friction", "torque"), unit("coulomb_friction", "torque", True)) == ("N m", "N")
+    assert (unit("backlash", "width"), unit("backlash", "width", True)) == ("rad", "m")
+    assert unit("deadband", "width", True) == "V"           # one unit for both kinds
+    row = {"record": "r", "effects": [{"effect": "coulomb_friction", "joint": "lift", "params": {"torque": 1.0}},
+                                      {"effect": "backlash", "joint": "j2", "params": {"width": 0.01}}]}
+    (out,) = with_units([row], frozenset({"lift"}))
+    assert [e["units"] for e in out["effects"]] == [{"torque": "N"}, {"width": "rad"}]
 
 
 def test_rerun_skips_unchanged_records(fleets, records, tmp_path):

@@ -24,6 +24,13 @@ def _fmt(v, digits=4) -> str:
     return e(str(v))
 
 
+def _unit(u: str | None, paren: bool = False) -> str:
+    """' V' (or ' (V)'), escaped; nothing for a dimensionless or unknown unit."""
+    if not u or u == "-":
+        return ""
+    return f" ({e(u)})" if paren else f" {e(u)}"
+
+
 def _png(fig) -> str:
     import matplotlib.pyplot as plt
 
@@ -43,6 +50,8 @@ def parameter_plot(view: dict, param: str, order: list[str]) -> str:
     import matplotlib.pyplot as plt
 
     pts = view["params"][param]
+    u = view["units"].get(param)
+    unit = f" {u}" if u and u != "-" else ""
     dated = all(p["date"] for p in pts)
     fig, ax = plt.subplots(figsize=(9, 3.0))
     if dated:
@@ -75,7 +84,7 @@ def parameter_plot(view: dict, param: str, order: list[str]) -> str:
         ends = [t0, t1]
         ax.plot([datetime.fromtimestamp(t * 86400.0) for t in ends],
                 [mean_y + tr["per_day"] * (t - mean_t) for t in ends], "--", color="tab:red", lw=1.0,
-                label=f"trend {tr['per_day']:+.3g} per day")
+                label=f"trend {tr['per_day']:+.3g}{unit} per day")
     if dated:
         ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(ax.xaxis.get_major_locator()))
         ax.set_xlabel("record date")
@@ -83,8 +92,7 @@ def parameter_plot(view: dict, param: str, order: list[str]) -> str:
         ax.set_xticks(range(len(order)))
         ax.set_xticklabels(order, rotation=45, ha="right", fontsize=7)
         ax.set_xlabel("record")
-    u = view["units"].get(param)
-    ax.set_ylabel(f"{view['label']} {param}" + (f" ({u})" if u and u != "-" else ""))
+    ax.set_ylabel(f"{view['label']} {param}" + (f" ({u})" if unit else ""))
     ax.legend(fontsize=8, loc="best")
     return _png(fig)
 
@@ -119,7 +127,7 @@ def index_html(data: dict) -> str:
             continue
         eff = "<br>".join(
             f"<b>{e(x['label'])}</b>: " + ", ".join(f"{e(k)}={_fmt(v)} [{_fmt(x['ci95'][k][0])}, {_fmt(x['ci95'][k][1])}]"
-                                                    for k, v in x["params"].items())
+                                                    + _unit(x.get("units", {}).get(k)) for k, v in x["params"].items())
             + (" <i>(ambiguous)</i>" if x["ambiguous"] else "") for x in r["effects"]) or "-"
         fits = "".join(f"<td>{_fmt(r['fit_before'].get(j), 3)} &rarr; {_fmt(r['fit_after'].get(j), 3)}</td>" for j in joints)
         cls = "discrepancy" if r["verdict"] == "discrepancy" else "ok"
@@ -138,13 +146,13 @@ def index_html(data: dict) -> str:
             tr = view["trend"].get(k)
             if tr:
                 word = "rises" if tr["rising"] else "falls" if tr["falling"] else "shows no significant trend"
-                u = view["units"].get(k)
-                u = f" {u}" if u and u != "-" else ""
-                parts.append(f"<p>{e(k)} {word}: {tr['per_day']:+.4g}{e(u)} per day (95 %: {_fmt(tr['ci95'][0])} .. "
+                parts.append(f"<p>{e(k)} {word}: {tr['per_day']:+.4g}{_unit(view['units'].get(k))} per day (95 %: {_fmt(tr['ci95'][0])} .. "
                              f"{_fmt(tr['ci95'][1])}) over {tr['records']} dated records that name it.</p>")
             parts.append(f"<figure><img src='data:image/png;base64,{parameter_plot(view, k, order)}'>"
-                         f"<figcaption>{e(view['label'])} {e(k)} across the records</figcaption></figure>")
-            parts.append("<details><summary>values</summary><table><tr><th>record</th><th>date</th><th>value</th>"
+                         f"<figcaption>{e(view['label'])} {e(k)}{_unit(view['units'].get(k), paren=True)} across the "
+                         f"records</figcaption></figure>")
+            parts.append("<details><summary>values</summary><table><tr><th>record</th><th>date</th>"
+                         f"<th>{e(k)}{_unit(view['units'].get(k), paren=True)}</th>"
                          "<th>95 % interval</th><th>gain (points)</th><th>named</th></tr>"
                          + "".join(f"<tr><td>{e(p['record'])}</td><td>{_fmt(p['date'])}</td><td>{_fmt(p['value'])}</td>"
                                    f"<td>{'[' + _fmt(p['ci95'][0]) + ', ' + _fmt(p['ci95'][1]) + ']' if p['ci95'] else '-'}</td>"

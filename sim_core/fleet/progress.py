@@ -1,5 +1,6 @@
-"""Progress of a fleet: records done of those to diagnose, the ones running now, and the time left
-(the remaining records at the pace so far, which already counts the records running side by side)."""
+"""Progress of a fleet: a line when a record starts, and when one finishes: records done of those to
+diagnose, its result, the ones still running, and the time left (the remaining records at the pace so
+far, which already counts the records running side by side)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ class Progress:
         if self.t0 is None:
             self.t0 = self.clock()
         self.running.append(name)
+        self.log(f"started {name} ({len(self.running)} running, {self.done} of {self.total} done)")
 
     def time_left(self) -> float | None:
         if not self.done or self.t0 is None:

@@ -40,10 +40,11 @@ def record_row(name: str, source: str, date: str | None, status: str, diag: dict
     return row
 
 
-def effect_views(rows: list[dict]) -> list[dict]:
+def effect_views(rows: list[dict], prismatic: frozenset[str] = frozenset()) -> list[dict]:
     """Per effect (and joint) named in at least one record: which records show it, and each
-    parameter across the records (named there, or only fitted as a candidate), with its trend
-    over time where the records are dated."""
+    parameter across the records (named there, or only fitted as a candidate) with its unit (on the
+    joint's kind: ``prismatic`` names the prismatic joints), and its trend over time where the
+    records are dated."""
     ok = [r for r in rows if r["status"] != "failed"]
     named: dict[str, tuple[str, str | None]] = {}
     for r in ok:
@@ -68,16 +69,26 @@ def effect_views(rows: list[dict]) -> list[dict]:
                                                          "ci95": None, "gain": c["gain"], "named": False})
         views.append({"effect": effect, "joint": joint, "label": lab, "records": showing,
                       "share": len(showing) / len(ok) if ok else 0.0, "params": params,
-                      "units": {k: unit(effect, k) for k in params},
+                      "units": {k: unit(effect, k, joint in prismatic) for k in params},
                       "trend": {k: trend(pts) for k, pts in params.items() if trend(pts) is not None}})
     return views
 
 
-def unit(effect: str, param: str) -> str:
+def unit(effect: str, param: str, prismatic: bool = False) -> str:
+    """The parameter's SI unit as the effect declares it; a unit declared for both joint kinds
+    ('N m or N') resolved to the joint's: the first for a revolute joint, the second for a prismatic one."""
     from ..effects import EFFECTS
 
     eff = EFFECTS.get(effect)
-    return next((p.unit for p in getattr(eff, "PARAMETERS", ()) if p.name == param), "")
+    u = next((p.unit for p in getattr(eff, "PARAMETERS", ()) if p.name == param), "")
+    kinds = u.split(" or ")
+    return kinds[1] if prismatic and len(kinds) == 2 else kinds[0] if len(kinds) == 2 else u
+
+
+def with_units(rows: list[dict], prismatic: frozenset[str] = frozenset()) -> list[dict]:
+    """The rows with each named effect's parameter units (``units``: param -> unit) added."""
+    return [{**r, "effects": [{**e, "units": {k: unit(e["effect"], k, e["joint"] in prismatic) for k in e["params"]}}
+                              for e in r["effects"]]} for r in rows]
 
 
 def days(date: str) -> float:

@@ -66,6 +66,12 @@ def _finish_text(row: dict) -> str:
     return f"{row['verdict']}" + (f": {named}" if named else "") + f" ({row['seconds']:.0f} s)"
 
 
+def prismatic_joints(spec) -> frozenset[str]:
+    from ..ingest.columns import PRISMATIC, joint_type
+
+    return frozenset(j for j in spec.joint_names if joint_type(spec, j) == PRISMATIC)
+
+
 def _clear(record_dir: Path) -> None:
     for name in RECORD_FILES:
         (record_dir / name).unlink(missing_ok=True)
@@ -123,6 +129,7 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
     out_dir.mkdir(parents=True, exist_ok=True)
     names = record_names(paths)
     spec = opts.spec
+    prismatic = prismatic_joints(spec)
     rows, todo, dates, notes = _plan(paths, names, opts, out_dir)
     unchanged = [r["record"] for r in rows if r is not None and r["status"] == "unchanged"]
     if unchanged:
@@ -137,7 +144,7 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
                                                    error="not diagnosed: the run stopped before this record finished")
                 for i, r in enumerate(rows)]
         data = fleet_data(done, robot=spec.name, backend=backend.describe() if backend else None, generated=generated,
-                          wall_s=time.perf_counter() - t_start)
+                          wall_s=time.perf_counter() - t_start, prismatic=prismatic)
         out = write_summary(out_dir, data)
         if final:
             out["index"] = out_dir / "index.html"

@@ -14,19 +14,22 @@ import math
 import os
 from pathlib import Path
 
-from .rows import STATUSES, effect_views
+from .rows import STATUSES, effect_views, with_units
 
 CSV_FIXED = ("record", "source", "date", "status", "verdict", "effects", "seconds", "error")
 
 
-def fleet_data(rows: list[dict], *, robot: str, backend: str | None, generated: str, wall_s: float | None) -> dict:
+def fleet_data(rows: list[dict], *, robot: str, backend: str | None, generated: str, wall_s: float | None,
+               prismatic: frozenset[str] = frozenset()) -> dict:
+    """The fleet.json content; ``prismatic``: the robot's prismatic joints (their parameters are in m, N)."""
+    rows = with_units(rows, prismatic)
     totals = {s: sum(r["status"] == s for r in rows) for s in STATUSES}
     verdicts = {}
     for r in rows:
         if r["verdict"]:
             verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
     return {"robot": robot, "generated": generated, "backend": backend, "records": rows,
-            "effects": effect_views(rows),
+            "effects": effect_views(rows, prismatic),
             "totals": {"records": len(rows), **totals, "verdicts": verdicts,
                        "wall_s": None if wall_s is None else round(wall_s, 2)}}
 
