@@ -49,7 +49,8 @@ class JointFeedforward:
             cyl = js.components["cylinder"]
             i = tree.index(js.dof)
             self.area_a, self.area_b = cyl.area_a, cyl.area_b    # m^2
-            self.c0, self.d1, self.d2, _, _ = cyl.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+            self.direct = cyl.direct
+            self.c0, self.d1, self.d2 = (0.0, 0.0, 0.0) if cyl.direct else cyl.linkage(tree.axis[i], tree.lower[i], tree.upper[i])[:3]
             cylinder_length(0.5 * (tree.lower[i] + tree.upper[i]), self.c0, self.d1, self.d2)  # load the compiled
             # function now: its first call takes ~1 s, which a realtime loop must not spend mid-run
         else:
@@ -59,7 +60,7 @@ class JointFeedforward:
     def flows(self, q: float, qd: float) -> tuple[float, float]:
         """Desired flows (m^3/s, >= 0) into/out of chambers A and B for joint speed ``qd`` (rad/s) at ``q`` (rad)."""
         if self.kind == "cylinder":
-            _, arm = cylinder_length(q, self.c0, self.d1, self.d2)
+            arm = 1.0 if self.direct else cylinder_length(q, self.c0, self.d1, self.d2)[1]
             v = abs(arm * qd)
             return self.area_a * v, self.area_b * v
         f = self.flow_per_rad * abs(qd)

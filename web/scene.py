@@ -95,6 +95,8 @@ class ActuatorGeometry:
         cyl, rot = [], []
         for a, js in enumerate(spec.joints):
             i = tree.index(js.dof)
+            if js.kind == "cylinder" and js.components["cylinder"].direct:
+                continue    # acts along the prismatic joint: the moving link shows it
             if js.kind == "cylinder":
                 c = js.components["cylinder"]
                 _, _, _, l_min, stroke = c.linkage(tree.axis[i], tree.lower[i], tree.upper[i])

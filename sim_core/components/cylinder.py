@@ -1,4 +1,5 @@
-"""Double-acting single-rod (asymmetric) cylinder acting on a revolute joint through its mounts."""
+"""Double-acting single-rod (asymmetric) cylinder: on a revolute joint through its mounts, or acting
+directly on a prismatic joint."""
 
 import math
 
@@ -9,18 +10,20 @@ from ..kernel.layout import AP, XS, col
 from .base import Component, Parameter, ParameterError
 from .chambers import AREA_A, AREA_B, P_A, P_B, VDEAD_A, VDEAD_B, VISC, lower_relief
 
-LK_C0, LK_D1, LK_D2, LK_LMIN, STROKE = AP.declare(
+LK_C0, LK_D1, LK_D2, LK_LMIN, STROKE, LK_DIRECT, LK_OFFSET = AP.declare(
     "cylinder",
     col("LK_C0", "m^2", "linkage: L^2 = C0 - 2 (D1 cos q + D2 sin q)"),
     col("LK_D1", "m^2", "linkage D1"),
     col("LK_D2", "m^2", "linkage D2"),
     col("LK_LMIN", "m", "pin-to-pin length at full retraction"),
     col("STROKE", "m", "cylinder stroke"),
+    col("LK_DIRECT", "-", "1.0: direct-acting (piston position x = q + LK_OFFSET, arm 1); 0.0: through the mounts"),
+    col("LK_OFFSET", "m", "direct-acting: piston position at joint position 0"),
 )
 CYL_L, CYL_ARM = XS.declare(
     "cylinder",
-    col("CYL_L", "m", "pin-to-pin length L at the actuator's current angle (computed once per substep)"),
-    col("CYL_ARM", "m/rad", "moment arm dL/dq there"),
+    col("CYL_L", "m", "pin-to-pin length L at the actuator's current position (computed once per substep)"),
+    col("CYL_ARM", "m/rad or m/m", "moment arm dL/dq there (1 for a direct-acting cylinder)"),
 )
 
 CITATION_CYLINDER = (
@@ -42,6 +45,11 @@ class Cylinder(Component):
     Positive joint motion extends the cylinder (checked over the joint range); the stroke ends are
     the joint limits, so x = L(q) - L(q_lower) in [0, stroke].
 
+    ``linkage = "direct"``: the cylinder acts along a prismatic joint (a ram lifting a carriage, a
+    test-bench cylinder pushing a load): x = q + offset (m), dL/dq = 1, the force acts on the joint
+    as it is (N); no mounts. ``offset`` defaults to -q_lower and ``stroke`` to q_upper - q_lower
+    (the URDF limits are the stroke ends); x must stay in [0, stroke] over the joint range.
+
     Hydraulics (chamber A = cap side, B = rod side):
 
         V_A = V_0A + A_A x,      V_B = V_0B + A_B (stroke - x)
@@ -56,8 +64,13 @@ class Cylinder(Component):
     PARAMETERS = (
         Parameter("bore", "m", "piston diameter", None, 5e-3, 1.0),
         Parameter("rod_diameter", "m", "rod diameter", None, 1e-3, 1.0),
-        Parameter("base_mount", "m", "cylinder base pin in the parent joint frame", None, kind="vec3"),
-        Parameter("rod_mount", "m", "rod-eye pin in the child link frame", None, kind="vec3"),
+        Parameter("linkage", "-", "'mounts': through base and rod pins on a revolute joint; 'direct': along a prismatic joint",
+                  "mounts", kind="choice", choices=("mounts", "direct")),
+        Parameter("base_mount", "m", "cylinder base pin in the parent joint frame (linkage 'mounts')", (), kind="vec3"),
+        Parameter("rod_mount", "m", "rod-eye pin in the child link frame (linkage 'mounts')", (), kind="vec3"),
+        Parameter("offset", "m", "linkage 'direct': piston position at joint position 0; 'auto' = -q_lower", "auto",
+                  -10.0, 10.0),
+        Parameter("stroke", "m", "linkage 'direct': piston stroke; 'auto' = q_upper - q_lower", "auto", 1e-3, 20.0),
         Parameter("dead_volume_a", "m^3", "cap-side volume at full retraction (end cap, ports, manifold)", None, 0.0, 1.0),
         Parameter("dead_volume_b", "m^3", "rod-side volume at full extension", None, 0.0, 1.0),
         Parameter("viscous_friction", "N s/m", "viscous seal friction on the rod", 0.0, 0.0, 1e7),
@@ -68,6 +81,38 @@ class Cylinder(Component):
         super().__init__(values, where)
         if self.values["rod_diameter"] >= self.values["bore"]:
             raise ParameterError(f"{self.where}.rod_diameter: must be smaller than the bore")
+        if self.direct:
+            extra = [k for k in ("base_mount", "rod_mount") if self.values[k] != ()]
+            if extra:
+                raise ParameterError(f"{self.where}: {', '.join(extra)} given but linkage = 'direct' has no mounts")
+        else:
+            for k in ("base_mount", "rod_mount"):
+                if self.values[k] == ():
+                    raise ParameterError(f"{self.where}.{k}: required parameter missing (m): "
+                                         f"{self.PARAMETER_DOC[k]} (or linkage = 'direct' on a prismatic joint)")
+            extra = [k for k in ("offset", "stroke") if self.values[k] != "auto"]
+            if extra:
+                raise ParameterError(f"{self.where}: {', '.join(extra)} only apply to linkage = 'direct'")
+
+    PARAMETER_DOC = {"base_mount": "cylinder base pin in the parent joint frame",
+                     "rod_mount": "rod-eye pin in the child link frame"}
+
+    @property
+    def direct(self) -> bool:
+        return self.values["linkage"] == "direct"
+
+    def direct_geometry(self, lower: float, upper: float) -> tuple[float, float]:
+        """(offset, stroke) in m of a direct-acting cylinder on a joint with limits [lower, upper] (m)."""
+        if not (math.isfinite(lower) and math.isfinite(upper)):
+            raise ParameterError(f"{self.where}: a cylinder-driven joint needs finite limits in the URDF")
+        off = -lower if self.values["offset"] == "auto" else float(self.values["offset"])
+        stroke = upper - lower if self.values["stroke"] == "auto" else float(self.values["stroke"])
+        if lower + off < -1e-9 or upper + off > stroke + 1e-9:
+            raise ParameterError(
+                f"{self.where}: piston position x = q + offset runs over [{lower + off:.4g}, {upper + off:.4g}] m "
+                f"on the joint range [{lower:.4g}, {upper:.4g}] m; it must stay within [0, stroke = {stroke:.4g}] m"
+            )
+        return off, stroke
 
     @property
     def area_a(self) -> float:
@@ -102,6 +147,28 @@ class Cylinder(Component):
         L = np.sqrt(L2)
         return c0, d1, d2, float(L[0]), float(L[-1] - L[0])
 
+    def check_geometry(self, tree, i: int) -> None:
+        """Raise :class:`ParameterError` unless the cylinder fits joint ``i`` of ``tree`` over its range."""
+        if self.direct:
+            if tree.jtype is None or tree.jtype[i] != 1:
+                raise ParameterError(f"{self.where}: linkage = 'direct' needs a prismatic joint; "
+                                     f"{tree.dof_names[i]!r} is revolute in the URDF "
+                                     f"(give base_mount and rod_mount instead)")
+            self.direct_geometry(tree.lower[i], tree.upper[i])
+        else:
+            if tree.jtype is not None and tree.jtype[i] == 1:
+                raise ParameterError(f"{self.where}: the joint is prismatic; a cylinder on it acts directly: "
+                                     f"set linkage = 'direct' (and drop the mounts)")
+            self.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+
+    def arms(self, tree, i: int, qs) -> np.ndarray:
+        """dL/dq at joint positions ``qs`` of joint ``i`` (m/rad through mounts; 1 when direct-acting)."""
+        qs = np.asarray(qs, dtype=float)
+        if self.direct:
+            return np.ones_like(qs)
+        c0, d1, d2, _, _ = self.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+        return (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(c0 - 2 * (d1 * np.cos(qs) + d2 * np.sin(qs)))
+
     KIND = "cylinder"
     KERNEL = {"prime": "cylinder_prime", "force": "cylinder_force", "geometry": "cylinder_geometry"}
 
@@ -111,9 +178,17 @@ class Cylinder(Component):
         AP_ = lw.AP
         AP_[a, AREA_A] = self.area_a
         AP_[a, AREA_B] = self.area_b
-        c0, d1, d2, lmin, stroke = self.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
-        AP_[a, LK_C0], AP_[a, LK_D1], AP_[a, LK_D2] = c0, d1, d2
-        AP_[a, LK_LMIN], AP_[a, STROKE] = lmin, stroke
+        self.check_geometry(tree, i)
+        if self.direct:
+            off, stroke = self.direct_geometry(tree.lower[i], tree.upper[i])
+            AP_[a, LK_DIRECT], AP_[a, LK_OFFSET] = 1.0, off
+            AP_[a, LK_C0], AP_[a, LK_D1], AP_[a, LK_D2] = 0.0, 0.0, 0.0
+            AP_[a, LK_LMIN], AP_[a, STROKE] = 0.0, stroke
+        else:
+            c0, d1, d2, lmin, stroke = self.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
+            AP_[a, LK_DIRECT], AP_[a, LK_OFFSET] = 0.0, 0.0
+            AP_[a, LK_C0], AP_[a, LK_D1], AP_[a, LK_D2] = c0, d1, d2
+            AP_[a, LK_LMIN], AP_[a, STROKE] = lmin, stroke
         AP_[a, VDEAD_A] = self["dead_volume_a"]
         AP_[a, VDEAD_B] = self["dead_volume_b"]
         AP_[a, VISC] = self["viscous_friction"]
@@ -123,7 +198,7 @@ class Cylinder(Component):
     def holding_pressures(AP_row, th, tau, pm):
         """Chamber pressures (Pa) around the mean ``pm`` that hold joint torque ``tau`` at ``th``,
         spread over both chambers in proportion to their areas (least-norm deviation from ``pm``)."""
-        _, arm = cylinder_length(th, AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2])
+        _, arm = piston_position(th, AP_row)
         A_a, A_b = AP_row[AREA_A], AP_row[AREA_B]
         lam = (tau / arm - pm * (A_a - A_b)) / (A_a ** 2 + A_b ** 2)
         return pm + lam * A_a, pm - lam * A_b
@@ -135,14 +210,16 @@ class Cylinder(Component):
 
     @staticmethod
     def moment_arms(AP_row, qs):
-        """dL/dq (m/rad) at joint angles ``qs`` from a lowered actuator row."""
+        """dL/dq (m/rad, or 1 for a direct-acting cylinder) at joint positions ``qs`` from a lowered actuator row."""
+        if AP_row[LK_DIRECT] != 0.0:
+            return np.ones_like(np.asarray(qs, dtype=float))
         c0, d1, d2 = AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2]
         return (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(c0 - 2 * (d1 * np.cos(qs) + d2 * np.sin(qs)))
 
     @staticmethod
     def chamber_volumes(AP_row, th):
         """(V_A, V_B) in m^3 at actuator angle ``th`` (stored-energy bookkeeping)."""
-        L, _ = cylinder_length(th, AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2])
+        L, _ = piston_position(th, AP_row)
         x = L - AP_row[LK_LMIN]
         return AP_row[VDEAD_A] + AP_row[AREA_A] * x, AP_row[VDEAD_B] + AP_row[AREA_B] * (AP_row[STROKE] - x)
 
@@ -159,10 +236,24 @@ def cylinder_length(q, c0, d1, d2):
     return L, (d1 * s - d2 * c) / L
 
 
+def piston_position(th, AP_row):
+    """(L, dL/dq) of a lowered actuator row at actuator position ``th`` (Python side)."""
+    if AP_row[LK_DIRECT] != 0.0:
+        return th + AP_row[LK_OFFSET], 1.0
+    return cylinder_length(th, AP_row[LK_C0], AP_row[LK_D1], AP_row[LK_D2])
+
+
+@njit(inline="always")
+def _length(a, th, AP):
+    if AP[a, LK_DIRECT] != 0.0:
+        return th + AP[a, LK_OFFSET], 1.0
+    return cylinder_length(th, AP[a, LK_C0], AP[a, LK_D1], AP[a, LK_D2])
+
+
 @njit(inline="always")
 def cylinder_prime(a, th, AP, XS):
-    """Cache L and dL/dq at the actuator angle ``th``."""
-    L, arm = cylinder_length(th, AP[a, LK_C0], AP[a, LK_D1], AP[a, LK_D2])
+    """Cache L and dL/dq at the actuator position ``th``."""
+    L, arm = _length(a, th, AP)
     XS[a, CYL_L] = L
     XS[a, CYL_ARM] = arm
 
@@ -180,7 +271,7 @@ def cylinder_force(a, AP, XS):
 def cylinder_geometry(a, th, om, AP, XS):
     """Chamber volumes (m^3), displaced flows (m^3/s) and volume rates (m^3/s) at angle ``th`` and rate
     ``om``; caches L and the arm for the next substep's force."""
-    L, arm = cylinder_length(th, AP[a, LK_C0], AP[a, LK_D1], AP[a, LK_D2])
+    L, arm = _length(a, th, AP)
     XS[a, CYL_L] = L
     XS[a, CYL_ARM] = arm
     x = L - AP[a, LK_LMIN]

@@ -19,7 +19,7 @@ class Backlash(Effect):
 
     name = "backlash"
     citation = CITE_CATALOG + " (§3.9)"
-    PARAMETERS = (Parameter("width", "rad", "total play", 0.01, 0.0, 0.2),)
+    PARAMETERS = (Parameter("width", "rad or m", "total play (m on a prismatic joint)", 0.01, 0.0, 0.2),)
     requires_sensor = True
     HOOKS = {"sensor_position": "sensed_through_play", "after_substep": "advance_play", "after_substep_off": "track_joint"}
     ORDER = 0

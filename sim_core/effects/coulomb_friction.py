@@ -25,8 +25,8 @@ class CoulombFriction(Effect):
     name = "coulomb_friction"
     citation = "C. Canudas de Wit et al., 'A new model for control of systems with friction', IEEE TAC 40(3), 1995; " + CITE_CATALOG + " (§3.8)"
     PARAMETERS = (
-        Parameter("torque", "N m", "Coulomb friction torque at the joint", 20.0, 0.0, 2e5),
-        Parameter("smoothing_velocity", "rad/s", "velocity scale of the tanh regularisation", 0.01, 1e-4, 1.0),
+        Parameter("torque", "N m or N", "Coulomb friction torque at the joint (a force in N on a prismatic joint)", 20.0, 0.0, 2e5),
+        Parameter("smoothing_velocity", "rad/s or m/s", "velocity scale of the tanh regularisation", 0.01, 1e-4, 1.0),
     )
     HOOKS = {"joint_friction": "friction_at_joint"}
     CONFUSIONS = {"payload": "chamber pressures while raising and lowering"}

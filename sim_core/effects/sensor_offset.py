@@ -15,7 +15,7 @@ class SensorOffset(Effect):
 
     name = "sensor_offset"
     citation = CITE_CATALOG + " (§3.10)"
-    PARAMETERS = (Parameter("offset", "rad", "added to the measured angle", 0.02, -0.5, 0.5),)
+    PARAMETERS = (Parameter("offset", "rad or m", "added to the measured angle (position in m on a prismatic joint)", 0.02, -0.5, 0.5),)
     requires_sensor = True
     switch = False          # always applied; 0.0 when off
     HOOKS = {"sensor_position": "shifted_position"}

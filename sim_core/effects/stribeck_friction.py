@@ -31,10 +31,10 @@ class StribeckFriction(Effect):
                 "systems with friction', IEEE TAC 40(3), 1995; B. Armstrong-Helouvry, Control of Machines "
                 "with Friction, 1991")
     PARAMETERS = (
-        Parameter("static_torque", "N m", "breakaway friction at zero speed", 40.0, 0.0, 2e5),
-        Parameter("coulomb_torque", "N m", "friction at speeds well above the Stribeck velocity", 20.0, 0.0, 2e5),
-        Parameter("stribeck_velocity", "rad/s", "speed over which the friction falls from static to Coulomb", 0.02, 1e-4, 1.0),
-        Parameter("smoothing_velocity", "rad/s", "velocity scale of the tanh regularisation at zero speed", 0.002, 1e-5, 0.1),
+        Parameter("static_torque", "N m or N", "breakaway friction at zero speed", 40.0, 0.0, 2e5),
+        Parameter("coulomb_torque", "N m or N", "friction at speeds well above the Stribeck velocity", 20.0, 0.0, 2e5),
+        Parameter("stribeck_velocity", "rad/s or m/s", "speed over which the friction falls from static to Coulomb", 0.02, 1e-4, 1.0),
+        Parameter("smoothing_velocity", "rad/s or m/s", "velocity scale of the tanh regularisation at zero speed", 0.002, 1e-5, 0.1),
     )
     HOOKS = {"joint_friction": "stribeck_torque"}
 

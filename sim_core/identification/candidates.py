@@ -99,9 +99,7 @@ def actuator_scales(spec, joint: str) -> dict:
     q_full = v["rated_flow"] * math.sqrt(ps / v["rated_pressure_drop"])
     if js.kind == "cylinder":
         cyl = js.components["cylinder"]
-        c0, d1, d2, lmin, stroke = cyl.linkage(tree.axis[i], tree.lower[i], tree.upper[i])
-        qs = np.linspace(tree.lower[i], tree.upper[i], 50)
-        arm = (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(c0 - 2 * (d1 * np.cos(qs) + d2 * np.sin(qs)))
+        arm = cyl.arms(tree, i, np.linspace(tree.lower[i], tree.upper[i], 50))
         torque = ps * cyl.area_a * float(np.max(np.abs(arm)))
         ratio = cyl.area_b / cyl.area_a
     else:

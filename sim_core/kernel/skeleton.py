@@ -57,11 +57,25 @@ _NJ = dict(cache=True, nogil=True)
 @njit(**_NJ)
 def rigid_body_refresh(tree, q, qd, ws):
     """M(q) and the Coriolis/gravity bias at the current state."""
-    kinematics(tree.parent, tree.R_tree, tree.p_tree, tree.axis, tree.com, tree.inertia, q,
-               ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33)
-    crba(tree.parent, tree.mass, ws.ow, ws.aw, ws.cw, ws.Iw, ws.mc, ws.hc, ws.Ic, ws.M)
-    rnea(tree.parent, tree.mass, tree.gravity, ws.ow, ws.aw, ws.cw, ws.Iw, qd, ws.zero, 1.0,
-         ws.w, ws.dw, ws.ao, ws.F, ws.N, ws.bias)
+    _rigid_body_refresh(tree, q, qd, ws, tree.jtype)
+
+
+@njit(**_NJ)
+def _rigid_body_refresh(tree, q, qd, ws, jtype):
+    # ``jtype`` is None for an all-revolute tree: numba prunes the branch on the argument's type, so
+    # such a tree runs the revolute-only code
+    if jtype is None:
+        kinematics(tree.parent, tree.R_tree, tree.p_tree, tree.axis, tree.com, tree.inertia, q,
+                   ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33)
+        crba(tree.parent, tree.mass, ws.ow, ws.aw, ws.cw, ws.Iw, ws.mc, ws.hc, ws.Ic, ws.M)
+        rnea(tree.parent, tree.mass, tree.gravity, ws.ow, ws.aw, ws.cw, ws.Iw, qd, ws.zero, 1.0,
+             ws.w, ws.dw, ws.ao, ws.F, ws.N, ws.bias)
+    else:
+        kinematics(tree.parent, tree.R_tree, tree.p_tree, tree.axis, tree.com, tree.inertia, q,
+                   ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33, jtype)
+        crba(tree.parent, tree.mass, ws.ow, ws.aw, ws.cw, ws.Iw, ws.mc, ws.hc, ws.Ic, ws.M, jtype)
+        rnea(tree.parent, tree.mass, tree.gravity, ws.ow, ws.aw, ws.cw, ws.Iw, qd, ws.zero, 1.0,
+             ws.w, ws.dw, ws.ao, ws.F, ws.N, ws.bias, jtype)
 
 
 @njit(**_NJ)

@@ -10,9 +10,10 @@ from collections import namedtuple
 
 import numpy as np
 
+from ..model.urdf import PRISMATIC
 from . import layout as L
 
-TreeArrays = namedtuple("TreeArrays", "parent R_tree p_tree axis mass com inertia gravity")
+TreeArrays = namedtuple("TreeArrays", "parent R_tree p_tree axis mass com inertia gravity jtype")
 
 Workspace = namedtuple("Workspace", [
     # world kinematics of every body (rigid_body.kinematics)
@@ -35,8 +36,11 @@ Workspace = namedtuple("Workspace", [
 
 def tree_arrays(tree, lowered) -> TreeArrays:
     """The kinematic tree with the lowered (payload-adjusted) masses and inertias."""
+    jtype = None     # all revolute: the prismatic branches are compiled out
+    if tree.jtype is not None and np.any(np.asarray(tree.jtype) == PRISMATIC):
+        jtype = np.ascontiguousarray(tree.jtype, dtype=np.int64)
     return TreeArrays(tree.parent, tree.R_tree, tree.p_tree, tree.axis, lowered.mass, lowered.com,
-                      lowered.inertia, tree.gravity)
+                      lowered.inertia, tree.gravity, jtype)
 
 
 def make_workspace(n: int, na: int) -> Workspace:
