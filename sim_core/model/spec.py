@@ -15,6 +15,8 @@ Robot configurations are chosen by name, like python-can interfaces: the built-i
 from __future__ import annotations
 
 import copy
+import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,13 +28,44 @@ from ..components import (
 )
 from ..components.base import Component, Parameter, ParameterError
 from ..effects import EFFECTS, EffectInstance, get_effect
-from .urdf import KinematicTree, load_urdf
+from .toml_lines import TomlLines
+from .urdf import KinematicTree, UrdfError, load_urdf
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "robots"
 
 
 class SpecError(ParameterError):
-    """The robot specification or a parameter override is invalid (the message names the path)."""
+    """The robot specification or a parameter override is invalid.
+
+    ``str(exc)`` reads ``<file>:<line>: <key>: <message>``, each part where known: the file and the
+    line (from tomllib for syntax errors, from a scan of the text for the rest) and the parameter
+    path or table the message is about.
+    """
+
+    def __init__(self, message: str, *, file: str | Path | None = None, line: int | None = None,
+                 key: str | None = None):
+        self.message, self.file, self.line, self.key = message, file, line, key
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        head = ""
+        if self.file is not None:
+            head = _display_path(self.file) + (f":{self.line}" if self.line else "") + ": "
+        if self.key and not self.message.startswith(f"{self.key}:"):
+            head += f"{self.key}: "
+        return head + self.message
+
+    def __reduce__(self):  # pickles (process pools, Ray) as the formatted message
+        return (SpecError, (str(self),))
+
+
+def _display_path(path: str | Path) -> str:
+    """A file path as a user would type it: relative to the working directory when inside it."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except (ValueError, OSError):
+        return str(p)
 
 
 class Integrator(Component):
@@ -117,6 +150,9 @@ class RobotSpec:
     passive: dict[str, JointSettings]
     effects: list[EffectInstance] = field(default_factory=list)
     source: Path | None = None
+    # parameters the user does not know exactly: path -> (lower, upper) in the parameter's unit (the
+    # [estimated] table; calibration may move them within these bounds)
+    estimated: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     # ---- queries --------------------------------------------------------------------------------
     @property
@@ -263,9 +299,11 @@ class RobotSpec:
             i = self.tree.index(j.dof)
             if j.kind == "cylinder":
                 try:
-                    j.components["cylinder"].linkage(self.tree.axis[i], self.tree.lower[i], self.tree.upper[i])
+                    j.components["cylinder"].check_geometry(self.tree, i)
                 except ParameterError as exc:
-                    raise SpecError(f"joints.{j.name}: {exc}") from None
+                    m = _LEADING_KEY.match(str(exc))
+                    key, msg = (m.group(1), m.group(2)) if m else (f"joints.{j.name}.cylinder", str(exc))
+                    raise SpecError(msg, key=key) from None
 
 
 def _flatten(d: dict, prefix: str = "") -> dict[str, Any]:
@@ -283,14 +321,41 @@ def available_robots() -> list[str]:
     return sorted(p.name for p in ROBOTS_DIR.iterdir() if (p / "robot.toml").is_file())
 
 
-def _robot_file(name_or_path: str | Path) -> Path:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.is_file():
-        return p.resolve()
-    cand = ROBOTS_DIR / str(name_or_path) / "robot.toml"
-    if cand.is_file():
+def resolve_robot(name_or_path: str | Path) -> Path:
+    """The ``robot.toml`` that ``--robot`` names: a built-in robot's name, a directory holding a
+    ``robot.toml``, or the path of a ``robot.toml`` (any ``.toml`` file). A path that exists wins over
+    a built-in name."""
+    text = str(name_or_path)
+    p = Path(name_or_path).expanduser()
+    if p.is_dir():
+        if (p / "robot.toml").is_file():
+            return (p / "robot.toml").resolve()
+        if not (ROBOTS_DIR / text / "robot.toml").is_file():
+            tomls = sorted(x.name for x in p.glob("*.toml"))
+            hint = f" (it has {', '.join(tomls)}: give the file's path)" if tomls else \
+                " ('hydrohil rig new TEMPLATE --out DIR' writes one)"
+            raise SpecError(f"directory {text!r} holds no robot.toml{hint}")
+    elif p.is_file():
+        if p.suffix.lower() == ".toml":
+            return p.resolve()
+        if p.suffix.lower() == ".urdf":
+            raise SpecError(f"{text!r} is a URDF; --robot takes the robot.toml beside it (hydraulics, sensors), "
+                            f"a directory holding one, or a built-in name ({', '.join(available_robots())})")
+        raise SpecError(f"{text!r} is not a robot.toml; --robot takes a built-in name "
+                        f"({', '.join(available_robots())}), a directory holding robot.toml, or a robot.toml path")
+    cand = ROBOTS_DIR / text / "robot.toml"
+    if "/" not in text and "\\" not in text and cand.is_file():
         return cand
-    raise SpecError(f"unknown robot {str(name_or_path)!r}; built-in robots: {', '.join(available_robots())}")
+    if p.suffix.lower() == ".toml" or "/" in text or "\\" in text:
+        raise SpecError(f"unknown robot {text!r}: no such file or directory")
+    raise SpecError(f"unknown robot {text!r}; built-in robots: {', '.join(available_robots())} "
+                    f"(or a directory holding robot.toml, or a robot.toml path)")
+
+
+_robot_file = resolve_robot
+
+
+_TOML_POS = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 
 
 def _read_toml(path: Path) -> dict:
@@ -298,7 +363,14 @@ def _read_toml(path: Path) -> dict:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path}: invalid TOML: {exc}") from None
+        msg = str(exc)
+        m = _TOML_POS.search(msg)
+        line = int(m.group(1)) if m else getattr(exc, "lineno", None)
+        if m:
+            msg = f"{msg[:m.start()]} (column {m.group(2)})"
+        raise SpecError(f"invalid TOML: {msg}", file=path, line=line) from None
+    except OSError as exc:
+        raise SpecError(f"cannot read: {exc.strerror or exc}", file=path) from None
 
 
 def _compose_arms(data: dict, where: Path) -> dict:
@@ -357,66 +429,180 @@ def _merge(defaults: dict, joint: dict) -> dict:
     return out
 
 
+TOP_LEVEL = ("robot", "integrator", "fluid", "supply", "defaults", "joints", "passive", "effects", "estimated")
+JOINT_KEYS = ("dof", "initial_position", "payload_frame")
+_LEADING_KEY = re.compile(r"^([A-Za-z0-9_\-\[\]]+(?:\.[A-Za-z0-9_\-\[\]]+)*): (.*)$", re.S)
+_UNKNOWN = re.compile(r"^unknown parameter\(s\) ([A-Za-z0-9_\-]+)")
+_OUTSIDE = re.compile(r"^(-?[0-9.eE+\-]+|inf|-inf) \S+ is outside")
+
+# values written in a common non-SI unit: (unit in the spec, other unit, factor to SI)
+_UNIT_SLIPS = {
+    "Pa": (("bar", 1e5), ("MPa", 1e6), ("kPa", 1e3), ("psi", 6894.757)),
+    "m": (("mm", 1e-3), ("cm", 1e-2)),
+    "m^3/s": (("L/min", 1.0 / 60000.0), ("L/s", 1e-3)),
+    "m^3": (("cm^3", 1e-6), ("L", 1e-3)),
+    "m^3/rad": (("cm^3/rev", 1e-6 / (2 * math.pi)),),
+    "rad": (("deg", math.pi / 180.0),),
+    "m^2/s": (("cSt (mm^2/s)", 1e-6),),
+}
+
+
+def _unit_hint(param: Parameter | None, value: Any) -> str:
+    """' (looks like bar: 140 bar = 1.4e+07 Pa)' when a value out of range fits in another common unit."""
+    if param is None or param.kind != "float" or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return ""
+    for other, factor in _UNIT_SLIPS.get(param.unit, ()):
+        si = float(value) * factor
+        if param.lower <= si <= param.upper:
+            return f" (looks like {other}: {value:g} {other} = {si:.4g} {param.unit})"
+    return ""
+
+
+def _declared(cls: type[Component], name: str) -> Parameter | None:
+    for p in cls.PARAMETERS:
+        if p.name == name:
+            return p
+    return None
+
+
+class _Where:
+    """Builds located :class:`SpecError`s for one robot.toml."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.lines = TomlLines.of_file(path)
+
+    def error(self, key: str | None, message: str, *also: str | tuple) -> SpecError:
+        line = self.lines.find(*(k for k in (key, *also) if k)) if key or also else None
+        return SpecError(message, file=self.path, line=line, key=key)
+
+    def component(self, exc: ParameterError, where: str, cls: type[Component], values: dict,
+                  defaults_key: str | None = None) -> SpecError:
+        """A component's validation error, its key recovered from the message it starts with."""
+        msg = str(exc)
+        m = _LEADING_KEY.match(msg)
+        key, detail = (m.group(1), m.group(2)) if m else (where, msg)
+        u = _UNKNOWN.match(detail)
+        if u:
+            key = f"{key}.{u.group(1)}"
+        name = key[len(where) + 1:] if key.startswith(where + ".") else None
+        if name and _OUTSIDE.match(detail):
+            detail += _unit_hint(_declared(cls, name), values.get(name))
+        also = [f"{defaults_key}.{name}"] if defaults_key and name else []
+        return self.error(key, detail, *also, *( [defaults_key] if defaults_key else []))
+
+
+def _urdf_actuated(urdf_path: Path) -> dict[str, tuple[float, int | None]]:
+    """Moving URDF joints whose <limit effort> is above zero (a drive is expected): name -> (effort, line)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        text = urdf_path.read_text(encoding="utf-8", errors="replace")
+        root = ET.fromstring(text)
+    except (OSError, ET.ParseError):
+        return {}
+    lines = text.splitlines()
+    out = {}
+    for el in root.iter("joint"):
+        if el.get("type") not in ("revolute", "prismatic", "continuous"):
+            continue
+        lim = el.find("limit")
+        try:
+            effort = float(lim.get("effort", "0")) if lim is not None else 0.0
+        except ValueError:
+            effort = 0.0
+        if effort > 0.0:
+            name = el.get("name", "")
+            line = next((i for i, ln in enumerate(lines, 1) if re.search(rf"<joint\b[^>]*name=[\"']{re.escape(name)}[\"']", ln)), None)
+            out[name] = (effort, line)
+    return out
+
+
 def load_robot(name_or_path: str | Path) -> RobotSpec:
-    """Load a built-in robot by name, or a ``robot.toml`` by path."""
-    path = _robot_file(name_or_path)
+    """Load a robot: a built-in name, a directory holding ``robot.toml``, or a ``robot.toml`` path.
+
+    Errors are :class:`SpecError`s naming the file, the line, the key and what was expected."""
+    path = resolve_robot(name_or_path)
     data = _read_toml(path)
+    at = _Where(path)
     if "arms" in data:
         data = _compose_arms(data, path)
         defaults: dict = {}
     else:
         defaults = data.get("defaults", {})
-    unknown = sorted(set(data) - {"robot", "integrator", "fluid", "supply", "defaults", "joints", "passive", "effects"})
+    unknown = sorted(set(data) - set(TOP_LEVEL))
     if unknown:
-        raise SpecError(f"{path}: unknown table(s) {', '.join(unknown)}")
+        raise at.error(unknown[0], f"unknown table(s) {', '.join(unknown)}; known: {', '.join(TOP_LEVEL)}")
     robot = data.get("robot", {})
     for key in ("name", "urdf"):
         if key not in robot:
-            raise SpecError(f"{path}: [robot] needs {key}")
+            raise at.error(f"robot.{key}", f"[robot] needs {key}", "robot")
     urdf_path = (path.parent / robot["urdf"]).resolve()
-    tree = load_urdf(urdf_path)
+    if not urdf_path.is_file():
+        raise at.error("robot.urdf", f"no such file {_display_path(urdf_path)}")
+    try:
+        tree = load_urdf(urdf_path)
+    except UrdfError as exc:
+        raise SpecError(str(exc), file=urdf_path) from None
 
-    def comp(cls, values, where):
+    def comp(cls, values, where, defaults_key=None):
         try:
             return cls(values, where)
         except ParameterError as exc:
-            raise SpecError(f"{path.name}: {exc}") from None
+            raise at.component(exc, where, cls, values, defaults_key) from None
 
     joints: list[JointSpec] = []
+    moving = ", ".join(tree.dof_names)
     for jname, jt in data.get("joints", {}).items():
+        where = f"joints.{jname}"
+        if not isinstance(jt, dict):
+            raise at.error(where, f"expected a table [joints.{jname}], got {jt!r}")
         merged = _merge(defaults, jt)
         dof = merged.pop("dof", jname)
         if dof not in tree.dof_names:
-            raise SpecError(f"{path.name}: joints.{jname}: URDF has no moving joint {dof!r}")
+            raise at.error(f"{where}.dof" if "dof" in jt else where,
+                           f"the URDF ({urdf_path.name}) has no moving joint {dof!r}; its moving joints: {moving}",
+                           where)
         settings = {k: merged.pop(k) for k in list(merged) if k in ("initial_position", "payload_frame")}
-        bad = sorted(set(merged) - set(SECTIONS))
+        bad = sorted(k for k in merged if k not in SECTIONS)
         if bad:
-            raise SpecError(f"{path.name}: joints.{jname}: unknown section(s) {', '.join(bad)}; sections: {', '.join(SECTIONS)}")
+            raise at.error(f"{where}.{bad[0]}", f"unknown key(s) {', '.join(bad)}; known: "
+                           f"{', '.join(JOINT_KEYS)} and the sections {', '.join(SECTIONS)}")
         acts = [s for s in ACTUATOR_SECTIONS if s in merged]
         if len(acts) != 1:
-            raise SpecError(f"{path.name}: joints.{jname}: needs exactly one of [cylinder] or [rotary]")
+            raise at.error(where, "needs exactly one of [cylinder] or [rotary]"
+                           + (f" (has {' and '.join(acts)})" if acts else ""))
         missing = [s for s in REQUIRED_SECTIONS if s not in merged]
         if missing:
-            raise SpecError(f"{path.name}: joints.{jname}: missing section(s) {', '.join(missing)}")
-        comps = {sec: comp(SECTIONS[sec], vals, f"joints.{jname}.{sec}") for sec, vals in merged.items()}
-        js = JointSpec(jname, dof, comps, comp(JointSettings, settings, f"joints.{jname}"))
+            raise at.error(where, f"missing section(s) {', '.join(missing)} (give them here or under [defaults])")
+        comps = {sec: comp(SECTIONS[sec], vals, f"{where}.{sec}", f"defaults.{sec}") for sec, vals in merged.items()}
+        js = JointSpec(jname, dof, comps, comp(JointSettings, settings, where))
         pf = js.settings["payload_frame"]
         if pf and pf not in tree.link_frames:
-            raise SpecError(f"{path.name}: joints.{jname}.payload_frame: no URDF link {pf!r}")
+            raise at.error(f"{where}.payload_frame", f"no URDF link {pf!r}")
         joints.append(js)
     if not joints:
-        raise SpecError(f"{path}: no [joints]")
+        raise at.error("joints", "no [joints]: a robot needs at least one actuated joint")
     driven = {j.dof for j in joints}
     if len(driven) != len(joints):
-        raise SpecError(f"{path.name}: two joints drive the same URDF joint")
+        dup = next(d for d in driven if sum(j.dof == d for j in joints) > 1)
+        names = [j.name for j in joints if j.dof == dup]
+        raise at.error(f"joints.{names[1]}", f"drives URDF joint {dup!r} as joints.{names[0]} does")
+    passive_table = data.get("passive", {})
+    extra = sorted(set(passive_table) - (set(tree.dof_names) - driven))
+    if extra:
+        raise at.error(f"passive.{extra[0]}", f"{', '.join(extra)}: not passive moving joints of the URDF "
+                       f"(passive ones: {', '.join(d for d in tree.dof_names if d not in driven) or 'none'})")
+    for name, (effort, line) in _urdf_actuated(urdf_path).items():
+        if name in tree.dof_names and name not in driven and name not in passive_table:
+            raise SpecError(f"has effort {effort:g} (a driven joint) but {path.name} has no [joints.{name}] "
+                            f"(its actuator, valve, sensor); add one, or [passive.{name}] if nothing drives it "
+                            f"(or set its effort to 0)", file=urdf_path, line=line, key=f"joint {name!r}")
     passive: dict[str, JointSettings] = {}
     for dof in tree.dof_names:
         if dof in driven:
             continue
-        passive[dof] = comp(JointSettings, data.get("passive", {}).get(dof, {}), f"passive.{dof}")
-    extra = sorted(set(data.get("passive", {})) - set(passive))
-    if extra:
-        raise SpecError(f"{path.name}: passive: {', '.join(extra)} are not passive URDF joints")
+        passive[dof] = comp(JointSettings, passive_table.get(dof, {}), f"passive.{dof}")
     spec = RobotSpec(
         name=robot["name"],
         description=robot.get("description", ""),
@@ -430,15 +616,84 @@ def load_robot(name_or_path: str | Path) -> RobotSpec:
         passive=passive,
         source=path,
     )
-    spec.validate_structure()
-    for i, e in enumerate(data.get("effects", [])):
+    try:
+        spec.validate_structure()
+    except SpecError as exc:
+        raise at.error(exc.key, exc.message) from None
+    effects = data.get("effects", [])
+    if not isinstance(effects, list):
+        raise at.error("effects", "expected an array of tables [[effects]]")
+    for i, e in enumerate(effects):
         e = dict(e)
+        key = f"effects[{i}]"
         if "name" not in e:
-            raise SpecError(f"{path.name}: effects[{i}] needs a name")
+            raise SpecError("needs a name", file=path, line=at.lines.find(("effects", str(i))), key=key)
         name = e.pop("name")
         joint = e.pop("joint", None)
-        spec.enable_effect(name, joint, **e)
+        try:
+            spec.enable_effect(name, joint, **e)
+        except SpecError as exc:
+            pkey = next((k for k in e if f".{k}:" in exc.message or f" {k}:" in exc.message), None)
+            line = at.lines.find(("effects", str(i), pkey) if pkey else ("effects", str(i)))
+            raise SpecError(exc.message, file=path, line=line, key=f"{key}.{pkey}" if pkey else key) from None
+    spec.estimated = _estimated(spec, data.get("estimated", {}), at)
     return spec
+
+
+def _estimated(spec: RobotSpec, table: Any, at: _Where) -> dict[str, tuple[float, float]]:
+    """The ``[estimated]`` table: parameter path -> (lower, upper) in the parameter's unit."""
+    if not isinstance(table, dict):
+        raise at.error("estimated", 'expected a table of "path" = [lower, upper]')
+    out: dict[str, tuple[float, float]] = {}
+    for key, rng in _flatten(table).items():
+        def fail(msg, key=key):
+            line = at.lines.find(("estimated", key), ("estimated", *key.split(".")), "estimated")
+            return SpecError(msg, file=at.path, line=line, key=f'estimated."{key}"' if "." in key else f"estimated.{key}")
+        if (not isinstance(rng, list) or len(rng) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in rng)):
+            raise fail(f"expected [lower, upper] (two finite numbers), got {rng!r}")
+        lo, hi = float(rng[0]), float(rng[1])
+        if not lo < hi:
+            raise fail(f"lower {lo:g} must be below upper {hi:g}")
+        try:
+            param, value = estimable(spec, key)
+        except SpecError as exc:
+            raise fail(exc.message) from None
+        if lo < param.lower or hi > param.upper:
+            raise fail(f"[{lo:g}, {hi:g}] {param.unit} leaves the parameter's bounds [{param.lower:g}, {param.upper:g}] {param.unit}")
+        if not lo <= value <= hi:
+            raise fail(f"the value {value:g} {param.unit} lies outside its estimated range [{lo:g}, {hi:g}] {param.unit}")
+        out[key] = (lo, hi)
+    return out
+
+
+def estimable(spec: RobotSpec, key: str) -> tuple[Parameter, float]:
+    """(declared parameter, current value) of a scalar parameter path: a spec path
+    (``joints.lift.valve.rated_flow``) or an enabled effect's parameter
+    (``effects.<effect>.<joint>.<parameter>``, ``effects.<effect>.<parameter>`` for a global one)."""
+    parts = key.split(".")
+    if parts[0] == "effects":
+        if len(parts) not in (3, 4):
+            raise SpecError("expected effects.<effect>.<joint>.<parameter> or effects.<effect>.<parameter>")
+        joint = parts[2] if len(parts) == 4 else None
+        inst = next((e for e in spec.effects if e.name == parts[1] and e.joint == joint), None)
+        if inst is None:
+            on = [f"effects.{e.name}.{e.joint}" if e.joint else f"effects.{e.name}" for e in spec.effects]
+            raise SpecError(f"no such effect enabled in [[effects]] (enabled: {', '.join(on) or 'none'})")
+        param = next((p for p in EFFECTS[parts[1]].PARAMETERS if p.name == parts[-1]), None)
+        if param is None or parts[-1] not in inst.params:
+            raise SpecError(f"{parts[1]} has no parameter {parts[-1]!r}; known: "
+                            f"{', '.join(p.name for p in EFFECTS[parts[1]].PARAMETERS)}")
+        value = inst.params[parts[-1]]
+    else:
+        comp, name = spec._resolve(key)
+        param = _declared(type(comp), name)
+        if param is None:
+            raise SpecError(f"unknown parameter {name!r}; known: {', '.join(comp.values)}")
+        value = comp.values[name]
+    if param.kind != "float":
+        raise SpecError(f"not a number parameter ({param.kind}): only numbers can be estimated")
+    return param, float(value)
 
 
 def effect_names() -> list[str]:
