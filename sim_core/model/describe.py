@@ -1,0 +1,96 @@
+"""One robot described for people and programs (``hydrohil robots --robot R --json``): its joints
+with their type and the units of q, actuators, sensors, limits, switched-on effects and every
+parameter with its unit."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..effects import EFFECTS
+from .spec import ROBOTS_DIR, RobotSpec
+
+# units declared for a revolute joint that read differently on a prismatic one (referred to the joint)
+_PRISMATIC = {"rad": "m", "rad/V": "m/V", "rad/s": "m/s", "N m": "N", "N m s/rad": "N s/m"}
+
+
+def joint_unit(unit: str, prismatic: bool, joint_referred: bool = True) -> str:
+    """A declared unit resolved to the joint's kind: 'N m or N' -> the first (revolute) or second
+    (prismatic); a revolute unit of a joint-referred parameter (sensor, initial position) -> its linear one."""
+    kinds = unit.split(" or ")
+    if len(kinds) == 2:
+        return kinds[1] if prismatic else kinds[0]
+    return _PRISMATIC.get(unit, unit) if prismatic and joint_referred else unit
+
+
+def _value(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return list(v) if isinstance(v, tuple) else v
+
+
+def _params(comp, prismatic: bool, joint_referred: bool) -> dict:
+    return {p.name: {"value": _value(comp.values[p.name]), "unit": joint_unit(p.unit, prismatic, joint_referred)}
+            for p in comp.PARAMETERS}
+
+
+def describe_robot(spec: RobotSpec) -> dict:
+    tree = spec.tree
+    joints = []
+    for j in spec.joints:
+        i = tree.index(j.dof)
+        prismatic = bool(tree.is_prismatic(i))
+        qu = "m" if prismatic else "rad"
+        sensor = None
+        if j.sensed:
+            s = j.components["sensor"]
+            sensor = {"model": f"position = A * volts + B ({qu})", "A": s["A"], "A_unit": f"{qu}/V",
+                      "B": s["B"], "B_unit": qu, "noise_V": s["noise"], "range_V": list(s["range"])}
+        act = {"kind": j.actuator_label}
+        if j.kind == "cylinder":
+            cyl = j.components["cylinder"]
+            act.update(linkage=cyl["linkage"], bore_m=cyl["bore"], rod_diameter_m=cyl["rod_diameter"])
+        else:
+            act.update(type=j.components["rotary"]["type"], displacement_m3_per_rad=j.components["rotary"]["displacement"])
+        joints.append({
+            "name": j.name,
+            "urdf_joint": j.dof,
+            "type": "prismatic" if prismatic else "revolute",
+            "q_unit": qu,
+            "qd_unit": f"{qu}/s",
+            "actuator": act,
+            "sensed": j.sensed,
+            "sensor": sensor,
+            "limits": [_value(float(tree.lower[i])), _value(float(tree.upper[i]))],
+            "command_voltage_range": list(j.command_range),
+            "initial_position": j.settings["initial_position"],
+            "effects": [{"name": e.name, "params": dict(e.params),
+                         "units": {k: joint_unit(next((p.unit for p in EFFECTS[e.name].PARAMETERS if p.name == k), ""),
+                                                 prismatic) for k in e.params}}
+                        for e in spec.effects if e.joint == j.name],
+            "parameters": {
+                **{k: v for k, v in _params(j.settings, prismatic, True).items() if k == "initial_position"},
+                **{sec: _params(comp, prismatic, sec == "sensor") for sec, comp in j.components.items()},
+            },
+        })
+    passive = []
+    for d in spec.passive:
+        i = tree.index(d)
+        passive.append({"name": d, "type": "prismatic" if tree.is_prismatic(i) else "revolute",
+                        "q_unit": "m" if tree.is_prismatic(i) else "rad"})
+    source = spec.source
+    return {
+        "name": spec.name,
+        "description": spec.description,
+        "reference": spec.reference,
+        "source": str(source) if source else None,
+        "builtin": bool(source and source.parent.parent == ROBOTS_DIR),
+        "urdf": str(spec.urdf_path),
+        "joints": joints,
+        "passive_joints": passive,
+        "global_effects": [{"name": e.name, "params": dict(e.params)} for e in spec.effects if e.joint is None],
+        "supply": _params(spec.supply, False, False),
+        "fluid": _params(spec.fluid, False, False),
+        "integrator": _params(spec.integrator, False, False),
+        "estimated": {k: list(v) for k, v in spec.estimated.items()},
+    }
