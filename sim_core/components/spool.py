@@ -18,7 +18,7 @@ I_A, I_B, SPOOL_X, SPOOL_V, LAG_X = XS.declare(
     col("SPOOL_V", "1/s", "spool velocity", ode=True, atol=1e-8),
     col("LAG_X", "-", "spool_lag filtered position (follows the spool when the effect is off)", ode=True, atol=1e-10),
 )
-SPOOL_GAIN, SPOOL_WN, SPOOL_ZETA, SPOOL_LIMIT, LAG_TAU, CMD_H, PHI, GAM = AP.declare(
+SPOOL_GAIN, SPOOL_WN, SPOOL_ZETA, SPOOL_LIMIT, LAG_TAU, CMD_H, PHI, GAM, CMD_H0, PHI0, GAM0 = AP.declare(
     "spool",
     col("SPOOL_GAIN", "1/A", "spool position per net solenoid current"),
     col("SPOOL_WN", "rad/s", "spool natural frequency"),
@@ -28,6 +28,9 @@ SPOOL_GAIN, SPOOL_WN, SPOOL_ZETA, SPOOL_LIMIT, LAG_TAU, CMD_H, PHI, GAM = AP.dec
     col("CMD_H", "s", "substep the matrices below were computed for (-1: none)"),
     col("PHI", "-", "exact discretisation of the command chain, e^{A h} (5 x 5, row major)", 25),
     col("GAM", "-", "its input matrix, int_0^h e^{A s} ds B (5 x 2)", 10),
+    col("CMD_H0", "s", "base substep: the first one the chain was discretised for (-1: none)"),
+    col("PHI0", "-", "e^{A h0} (5 x 5, row major)", 25),
+    col("GAM0", "-", "int_0^h0 e^{A s} ds B (5 x 2)", 10),
 )
 F_SPOOL_STUCK, F_SPOOL_POS = AP.declare(
     "spool",
@@ -67,6 +70,7 @@ class Spool(Component):
         AP_[a, SPOOL_LIMIT] = self["stroke_limit"]
         AP_[a, LAG_TAU] = 0.01
         AP_[a, CMD_H] = -1.0
+        AP_[a, CMD_H0] = -1.0
 
     @staticmethod
     def lower_fault(lw, a, kind, mode):
@@ -99,8 +103,11 @@ def command_chain_matrix(tau_s, wn, zeta, gain, tau_lag, A, B):
 def expm_augmented(A, B, h, work, out_phi, out_gam):
     """Exact zero-order-hold discretisation: Phi = e^{Ah}, Gam = int_0^h e^{As} ds B.
 
-    Uses the augmented matrix exp([[A, B], [0, 0]] h) with scaling and squaring of a 16-term Taylor
-    series (error < 1e-15 after scaling the norm below 0.5). ``work`` is [4, 7, 7]; no allocation.
+    Uses the augmented matrix X = [[A, B], [0, 0]] h, balanced by a diagonal similarity in powers of
+    two (exact in floating point: the spool's velocity state is ~w_v^2 times larger than its
+    position in A, which would otherwise force many squarings), scaled to a norm below 0.5 and
+    squared back, with a Taylor series stopped once a term is below 1e-17 (at most 18 terms). A
+    short ``h`` costs a few terms only. ``work`` is [5, 7, 7] (or larger); no allocation.
     """
     n = 7
     X = work[0]
@@ -115,6 +122,39 @@ def expm_augmented(A, B, h, work, out_phi, out_gam):
             X[r, c] = A[r, c] * h
         X[r, 5] = B[r, 0] * h
         X[r, 6] = B[r, 1] * h
+    # balance: D X D^-1 with d_i powers of two (Parlett-Reinsch sweeps on the 5 x 5 block)
+    d = work[4, 0]
+    for i in range(n):
+        d[i] = 1.0
+    for _ in range(4):
+        changed = False
+        for i in range(5):
+            rsum = 0.0
+            csum = 0.0
+            for k in range(5):
+                if k != i:
+                    rsum += abs(X[i, k])
+                    csum += abs(X[k, i])
+            if rsum == 0.0 or csum == 0.0:
+                continue
+            f = 1.0
+            while csum < 0.5 * rsum:
+                csum *= 2.0
+                rsum *= 0.5
+                f *= 2.0
+            while csum > 2.0 * rsum:
+                csum *= 0.5
+                rsum *= 2.0
+                f *= 0.5
+            if f != 1.0:
+                changed = True
+                d[i] *= f
+                for k in range(n):
+                    X[i, k] /= f     # row i of D X D^-1 scales by 1/f, column i by f
+                for k in range(5):
+                    X[k, i] *= f
+        if not changed:
+            break
     nrm = 0.0
     for r in range(n):
         row = 0.0
@@ -132,18 +172,27 @@ def expm_augmented(A, B, h, work, out_phi, out_gam):
             X[r, c] *= scale
             S[r, c] = 1.0 if r == c else 0.0
             T[r, c] = S[r, c]
-    for k in range(1, 17):
-        # T = T @ X / k
-        for r in range(n):
+    for k in range(1, 19):
+        # T = T @ X / k (rows 5, 6 of T stay zero after the first term)
+        big = 0.0
+        for r in range(5 if k > 1 else n):
             for c in range(n):
                 acc = 0.0
-                for m in range(n):
+                for m in range(5):          # rows 5, 6 of X are zero
                     acc += T[r, m] * X[m, c]
                 P[r, c] = acc / k
-        for r in range(n):
+                if abs(P[r, c]) > big:
+                    big = abs(P[r, c])
+        for r in range(5 if k > 1 else n):
             for c in range(n):
                 T[r, c] = P[r, c]
                 S[r, c] += P[r, c]
+        if k > 1:
+            for r in range(5, n):
+                for c in range(n):
+                    T[r, c] = 0.0
+        if big < 1e-17:
+            break
     for _ in range(s):
         for r in range(n):
             for c in range(n):
@@ -154,22 +203,54 @@ def expm_augmented(A, B, h, work, out_phi, out_gam):
         for r in range(n):
             for c in range(n):
                 S[r, c] = P[r, c]
+    # undo the balance: e^X = D^-1 e^{D X D^-1} D
     for r in range(5):
         for c in range(5):
-            out_phi[r * 5 + c] = S[r, c]
-        out_gam[r * 2] = S[r, 5]
-        out_gam[r * 2 + 1] = S[r, 6]
+            out_phi[r * 5 + c] = S[r, c] * d[r] / d[c]
+        out_gam[r * 2] = S[r, 5] * d[r]
+        out_gam[r * 2 + 1] = S[r, 6] * d[r]
 
 
 @njit
 def refresh_command_chain(AP, h, Acc, Bcc, expw):
-    """Recompute the exact discretisation of every actuator's command chain for substep ``h``."""
+    """The exact discretisation of every actuator's command chain for substep ``h``.
+
+    The first substep seen becomes the base h0 (its Phi0, Gam0 kept); another h is reached from it
+    as Phi(h) = Phi0 e^{A d}, Gam(h) = Gam0 + Phi0 Gam(d) with d = h - h0 (exact: the semigroup
+    property), where the short (or negative) d needs a few Taylor terms only. A jittered time grid,
+    whose substep changes at every output step, thus costs about as much as a regular one.
+    ``expw`` is [6, 7, 7] scratch.
+    """
     for a in range(AP.shape[0]):
         if abs(AP[a, CMD_H] - h) <= 1e-9 * h:  # grids from arange differ in the last bits
             continue
         command_chain_matrix(AP[a, SOL_TAU], AP[a, SPOOL_WN], AP[a, SPOOL_ZETA],
                              AP[a, SPOOL_GAIN], AP[a, LAG_TAU], Acc, Bcc)
-        expm_augmented(Acc, Bcc, h, expw, AP[a, PHI:PHI + 25], AP[a, GAM:GAM + 10])
+        h0 = AP[a, CMD_H0]
+        if h0 <= 0.0 or abs(h - h0) > 0.5 * h0:
+            expm_augmented(Acc, Bcc, h, expw, AP[a, PHI:PHI + 25], AP[a, GAM:GAM + 10])
+            if h0 <= 0.0:
+                AP[a, CMD_H0] = h
+                for i in range(25):
+                    AP[a, PHI0 + i] = AP[a, PHI + i]
+                for i in range(10):
+                    AP[a, GAM0 + i] = AP[a, GAM + i]
+        else:
+            flat = expw[5].reshape(49)      # scratch beyond what expm_augmented uses
+            pd = flat[0:25]
+            gd = flat[25:35]
+            expm_augmented(Acc, Bcc, h - h0, expw, pd, gd)
+            for r in range(5):
+                for c in range(5):
+                    acc = 0.0
+                    for m in range(5):
+                        acc += AP[a, PHI0 + 5 * r + m] * pd[5 * m + c]
+                    AP[a, PHI + 5 * r + c] = acc
+                for c in range(2):
+                    acc = AP[a, GAM0 + 2 * r + c]
+                    for m in range(5):
+                        acc += AP[a, PHI0 + 5 * r + m] * gd[2 * m + c]
+                    AP[a, GAM + 2 * r + c] = acc
         AP[a, CMD_H] = h
 
 
@@ -240,5 +321,5 @@ def discretise(tau_s: float, wn: float, zeta: float, gain: float, tau_lag: float
     command_chain_matrix(tau_s, wn, zeta, gain, tau_lag, A, B)
     phi = np.zeros(25)
     gam = np.zeros(10)
-    expm_augmented(A, B, h, np.zeros((4, 7, 7)), phi, gam)
+    expm_augmented(A, B, h, np.zeros((6, 7, 7)), phi, gam)
     return phi.reshape(5, 5), gam.reshape(5, 2)

@@ -52,6 +52,6 @@ def make_workspace(n: int, na: int) -> Workspace:
         M=z((n, n)), Lf=z((n, n)), bias=z(n), zero=z(n),
         rhs=z(n), Dlin=z(n), Ffr=z(n), Sfr=z(n), Tact=z(n), Kst=z(n), qd0=z(n),
         spool_s=z(na),
-        Acc=z((5, 5)), Bcc=z((5, 2)), expw=z((4, 7, 7)),
+        Acc=z((5, 5)), Bcc=z((5, 2)), expw=z((6, 7, 7)),
         bq=z((2, n)), bs=z((na, L.XS_N)), bg=z(L.XG_N),
     )
