@@ -7,7 +7,8 @@ import logging
 
 def register_serve(sub):
     p = sub.add_parser("serve", help="run the HIL emulator: REST + CAN + browser viewer at a fixed rate")
-    p.add_argument("--robot", default="mars_nd")
+    p.add_argument("--robot", default="mars_nd",
+                   help="built-in robot name, a directory holding robot.toml, or a robot.toml path")
     p.add_argument("--host", default="127.0.0.1",
                    help="REST bind address (default loopback; beyond loopback a token is required, or --insecure)")
     p.add_argument("--port", type=int, default=8000)
@@ -127,12 +128,15 @@ def run_serve(args) -> int:
 
 def register_dbc(sub):
     p = sub.add_parser("dbc", help="print the CAN database (DBC) of a robot")
-    p.add_argument("--robot", default="mars_nd")
+    p.add_argument("--robot", default="mars_nd",
+                   help="built-in robot name, a directory holding robot.toml, or a robot.toml path")
     p.set_defaults(func=run_dbc)
 
 
 def run_dbc(args) -> int:
-    from .can.dbc import dbc_path
+    from sim_core.model.spec import load_robot
 
-    print(dbc_path(args.robot).read_text(), end="")
+    from .can.dbc import database_text
+
+    print(database_text(load_robot(args.robot)), end="")
     return 0

@@ -246,3 +246,38 @@ def test_a_rig_directory_works_through_excite_and_simulate(cli, rigs, tmp_path):
         check=True)
     header = (tmp_path / "out.csv").read_text().splitlines()[0].split(",")
     assert "q_boom" in header and "u_boom" in header
+
+
+def test_serve_and_dbc_run_a_rig_directory(cli, rigs, tmp_path):
+    """hydrohil serve --robot DIR: the engine runs the rig, REST commands move it, the CAN database is
+    generated from its joints (also what 'hydrohil dbc --robot DIR' prints)."""
+    import time
+
+    import cantools
+
+    from server_helpers import ServerProcess
+
+    d = rigs["cylinder_vertical"]
+    db = cantools.database.load_string(cli("dbc", "--robot", d, check=True).stdout, database_format="dbc")
+    assert {"ValveCommand_lift", "JointFeedback_lift"} <= {m.name for m in db.messages}
+    srv = ServerProcess(robot=str(d), can="socketcand", tmp_path=tmp_path)
+    try:
+        assert srv.rest.health()["robot"] == "cylinder_vertical"
+        q0 = srv.rest.state()["joints"]["lift"]["angle"]       # the measured position, m on this slide
+        srv.rest.set_voltages({"lift": 4.0})
+        time.sleep(1.0)
+        srv.rest.set_voltages({"lift": 0.0})
+        assert srv.rest.state()["joints"]["lift"]["angle"] > q0 + 0.02
+        assert srv.rest.parameters()["values"]["joints.lift.cylinder.bore"] == 0.05
+        # the browser monitor finds the rig through 'view --robot DIR' (the server only names it)
+        from web.links import LinkError, RemoteLink
+
+        with pytest.raises(LinkError, match="--robot"):
+            RemoteLink(srv.url)
+        link = RemoteLink(srv.url, robot=str(d))
+        try:
+            assert link.spec.source == d / "robot.toml"
+        finally:
+            link.close()
+    finally:
+        assert srv.stop() == 0

@@ -15,6 +15,8 @@ def register(sub):
                         "before the panel commands)")
     p.add_argument("--token", help="bearer token of the server (visible in ps: prefer HYDROHIL_TOKEN or --token-file)")
     p.add_argument("--token-file", metavar="FILE", help="read the server's bearer token from the first line of FILE")
+    p.add_argument("--robot", help="the server's robot when it is not built-in: a directory holding robot.toml, or "
+                                   "a robot.toml path (default: the built-in robot the server names)")
     p.add_argument("--rate", type=float, default=None, help="render rate in Hz (default 40)")
     p.add_argument("--log-level", default="info")
     p.set_defaults(func=run)
@@ -50,7 +52,7 @@ def run(args) -> int:
         log.warning("%s", w)
     try:
         # the stream runs faster than the renderer, so (almost) every frame has a fresh state
-        link = RemoteLink(args.url, token, rate_hz=min(1.5 * rate, 250.0))
+        link = RemoteLink(args.url, token, rate_hz=min(1.5 * rate, 250.0), robot=args.robot)
     except LinkError as exc:
         raise CliError(str(exc)) from None
     try:

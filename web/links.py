@@ -98,7 +98,8 @@ class RemoteLink:
 
     kind = "remote"
 
-    def __init__(self, url: str, token: str | None = None, *, rate_hz: float = 60.0, timeout: float = 5.0):
+    def __init__(self, url: str, token: str | None = None, *, rate_hz: float = 60.0, timeout: float = 5.0,
+                 robot: str | None = None):
         from sim_core.model.spec import SpecError, load_robot
 
         try:
@@ -118,9 +119,12 @@ class RemoteLink:
         self.polling = self.auth_required and not token    # the stream needs the token; GET /state does not
         self._health = health
         try:
-            self.spec = load_robot(self.robot)
+            self.spec = load_robot(robot or self.robot)
         except SpecError as exc:
-            raise LinkError(f"server runs robot {self.robot!r}, which this installation does not know: {exc}") from None
+            raise LinkError(f"server runs robot {self.robot!r}, which this installation does not know: {exc} "
+                            f"(a rig of your own: give its directory with --robot)") from None
+        if self.spec.name != self.robot:
+            raise LinkError(f"--robot {robot}: is robot {self.spec.name!r}, but the server runs {self.robot!r}")
         self._mirror_parameters()
         self._lock = threading.Lock()
         self._state: dict | None = None

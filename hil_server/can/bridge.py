@@ -55,7 +55,7 @@ class CanBridge:
         self.service = service
         self.spec_str = spec_str
         spec = service.params.spec
-        self.db = D.load_database(spec.name)
+        self.db = D.load_database_for(spec)
         joints = spec.joint_names
         self.joints = joints
         self.cmd_msgs = {}

@@ -79,6 +79,25 @@ def load_database(robot: str):
     return cantools.database.load_file(str(dbc_path(robot)))
 
 
+def database_text(spec) -> str:
+    """The CAN database of a loaded robot spec: the shipped file of a built-in robot, generated from
+    the spec's joints for any other (a user's rig from 'hydrohil rig new')."""
+    from sim_core.model.spec import ROBOTS_DIR
+
+    shipped = DBC_DIR / f"{spec.name}.dbc"
+    builtin = spec.source is not None and Path(spec.source).parent.parent == ROBOTS_DIR
+    if builtin and shipped.is_file():
+        return shipped.read_text()
+    return generate_dbc(spec.name, spec.joint_names, [j.sensed for j in spec.joints],
+                        [j.command_range for j in spec.joints])
+
+
+def load_database_for(spec):
+    import cantools
+
+    return cantools.database.load_string(database_text(spec), database_format="dbc")
+
+
 def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list[tuple[float, float]]) -> str:
     """DBC text for a robot with these actuated joints (used to write the shipped files)."""
     if len(joints) > MAX_JOINTS:

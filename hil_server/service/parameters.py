@@ -38,7 +38,7 @@ class ParameterMirror:
 
     def changed_from_defaults(self) -> dict:
         """Parameters and effects that differ from the robot's built-in spec (for fault reports)."""
-        return overrides(self.spec, load_robot(self.spec.name))
+        return overrides(self.spec, load_robot(self.spec.source or self.spec.name))
 
     def _change(self, mutate, op: str, *args):
         with self._lock:
