@@ -88,8 +88,10 @@ def database_text(spec) -> str:
     builtin = spec.source is not None and Path(spec.source).parent.parent == ROBOTS_DIR
     if builtin and shipped.is_file():
         return shipped.read_text()
+    jtype = spec.tree.jtype
+    prismatic = [jtype is not None and int(jtype[spec.tree.index(j.dof)]) == 1 for j in spec.joints]
     return generate_dbc(spec.name, spec.joint_names, [j.sensed for j in spec.joints],
-                        [j.command_range for j in spec.joints])
+                        [j.command_range for j in spec.joints], prismatic)
 
 
 def load_database_for(spec):
@@ -98,8 +100,10 @@ def load_database_for(spec):
     return cantools.database.load_string(database_text(spec), database_format="dbc")
 
 
-def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list[tuple[float, float]]) -> str:
-    """DBC text for a robot with these actuated joints (used to write the shipped files)."""
+def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list[tuple[float, float]],
+                 prismatic: list[bool] | None = None) -> str:
+    """DBC text for a robot with these actuated joints (used to write the shipped files). A prismatic
+    joint's ``angle`` and ``velocity`` signals carry m and m/s (same names, scaling and ranges)."""
     if len(joints) > MAX_JOINTS:
         raise ValueError(f"at most {MAX_JOINTS} joints")
     out = [
@@ -144,15 +148,16 @@ def generate_dbc(robot: str, joints: list[str], sensed: list[bool], ranges: list
     ]
     for a, j in enumerate(joints):
         lo, hi = ranges[a]
+        pos_unit, vel_unit = ("m", "m/s") if prismatic and prismatic[a] else ("rad", "rad/s")
         out += [
             f"BO_ {BASE_COMMAND + a} ValveCommand_{j}: 4 CONTROLLER",
             f' SG_ voltage : 0|16@1- (0.001,0) [{lo:g}|{hi:g}] "V" HIL',
             ' SG_ counter : 16|8@1+ (1,0) [0|255] "" HIL',
             "",
             f"BO_ {BASE_FEEDBACK + a} JointFeedback_{j}: 8 HIL",
-            ' SG_ angle : 0|16@1- (0.0001,0) [-3.2767|3.2767] "rad" CONTROLLER',
+            f' SG_ angle : 0|16@1- (0.0001,0) [-3.2767|3.2767] "{pos_unit}" CONTROLLER',
             ' SG_ sensor_voltage : 16|16@1+ (0.0002,0) [0|13.107] "V" CONTROLLER',
-            ' SG_ velocity : 32|16@1- (0.001,0) [-32.767|32.767] "rad/s" CONTROLLER',
+            f' SG_ velocity : 32|16@1- (0.001,0) [-32.767|32.767] "{vel_unit}" CONTROLLER',
             ' SG_ status : 48|8@1+ (1,0) [0|255] "" CONTROLLER',
             ' SG_ counter : 56|8@1+ (1,0) [0|255] "" CONTROLLER',
             "",
