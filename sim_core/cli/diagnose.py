@@ -28,8 +28,9 @@ def register(sub):
                    "one started on this machine with 'ray start --head'); default: a new local Ray instance")
     p.add_argument("--effects", nargs="+", metavar="NAME", help="restrict the candidate bank to these effects")
     p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
-                   help="where the simulation starts: the robot's initial positions, the record's first angles, or "
-                        "auto (the spec's unless the record starts more than 0.1 rad away)")
+                   help="where the simulation starts: the record's first readings (auto, data: the default; a sensor "
+                        "offset is then told from the start pose by what depends on the true pose) or the robot's "
+                        "initial positions (spec: the arm is known to start there, e.g. homed)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_model_options(p)
     add_reading_options(p)

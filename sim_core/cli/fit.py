@@ -10,18 +10,21 @@ def register(sub):
         help="calibrate model parameters to a measured record (output error); writes a --params file",
         description="Fit free parameters (default: the valve flow gains of the commanded, measured joints) so "
                     "the free-run simulation matches the record; report the NRMSE fit per channel and the "
-                    "parameter uncertainties. Free keys are parameter paths (joints.j2.valve.rated_flow, "
+                    "parameter uncertainties. Without --free, also the parameters the robot's spec marks estimated "
+                    "and the nominal ones the record identifies that no diagnosable effect could stand for; a "
+                    "parameter the record does not identify (|value/sigma| < 3) is reported and kept at its nominal value. Free keys are parameter paths (joints.j2.valve.rated_flow, "
                     "joints.j2.sensor.B, supply.pressure) or effect parameters (effects.deadband.boom.width).",
     )
     p.add_argument("--robot", required=True)
     p.add_argument("data", metavar="DATA.csv", help="measured record: a dataset (.csv or .parquet), or any log file "
                    "read with the reading options below")
     p.add_argument("--free", nargs="+", metavar="PARAM", help="parameters to fit (default: valve rated_flow of each "
-                   "commanded, measured joint)")
+                   "commanded, measured joint, and the spec's estimated parameters)")
     p.add_argument("--out", required=True, metavar="PARAMS.toml", help="parameter/effect file to write")
     p.add_argument("--validation", metavar="OTHER.csv", help="also report the fit on this record (read like DATA)")
     p.add_argument("--initial-pose", choices=("auto", "spec", "data"), default="auto",
-                   help="where the simulation starts (see 'hydrohil diagnose --help')")
+                   help="where the simulation starts: the record's first readings (auto, data: the default) or the "
+                        "robot's initial positions (spec)")
     p.add_argument("--max-simulations", type=int, default=80, help="budget of model simulations (default 80)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     add_model_options(p)
@@ -51,8 +54,14 @@ def run(args):
     print(f"fitted {len(res['parameters'])} parameter(s) on {args.data} ({res['simulations']} simulations)")
     for k, p in res["parameters"].items():
         lo, hi = p["ci95"]
+        if not p.get("identified", True):
+            print(f"  {k} = {p['value']:.6g} (nominal): NOT identified, fitted {p['fitted']:.6g} +- {p['sigma']:.3g} "
+                  f"({p.get('not_identified_because')})")
+            continue
         print(f"  {k} = {p['value']:.6g} +- {p['sigma']:.3g} (95 %: {lo:.6g} .. {hi:.6g}; was {p['initial']:.6g})"
               + ("  [at a search bound]" if p.get("at_bound") else ""))
+    for k, why in res.get("calibration", {}).get("held", {}).items():
+        print(f"  {k}: {why}")
     for where, fits in res["fit"].items():
         for j, ch in fits.items():
             text = ", ".join(f"{c} {v['before']:.2f} -> {v['after']:.2f} % (+-{v['spread']:.2f})" for c, v in ch.items())

@@ -1,24 +1,224 @@
 """Calibration of nominal parameters by output error (``hydrohil fit`` and diagnose's baseline).
 
-By default the free parameters are the valve flow gains (``joints.<j>.valve.rated_flow``) of the
-commanded, measured joints: the number every valve-controlled joint's speed scales with and the one
-a datasheet gets least right. Supply pressure, link masses and sensor calibrations are not freed by
-default: without pressure sensors they would absorb a payload, friction or a sensor offset, which
-``diagnose`` must be able to name (free them with ``--free`` when that is what you want).
+What the baseline frees (:func:`plan`):
+
+* always the valve flow gains (``joints.<j>.valve.rated_flow``) of the commanded, measured joints:
+  the number every valve-controlled joint's speed scales with and the one a datasheet gets least right;
+* every parameter the spec marks estimated (``[estimated]`` in robot.toml: a path and its range), within
+  that range: the user has said the number is a guess;
+* the nominal parameters a record can identify, but only when no effect of the candidate bank could
+  stand in for them: supply pressure and oil bulk modulus when chamber pressures are recorded, the
+  actuators' viscous friction, and a payload mass on a joint whose record carries a gravity load.
+  ``MIMICS`` lists, for each, the bank effects it can masquerade as (a lower bulk modulus *is* the
+  ``bulk_modulus`` effect; a viscous friction absorbs most of a Coulomb friction; a payload mass is the
+  ``payload`` effect). Freed while such an effect is searched, the calibration would absorb what
+  ``diagnose`` exists to name; so for a built-in robot with the whole bank only the flow gains are
+  freed, and a restricted bank (``--effects``) frees what no longer competes with it.
+
+After the fit each freed parameter is checked: identified when ``|value / sigma| >= 3`` and no
+correlation beyond ``CORRELATION_LIMIT`` ties it to another freed parameter (of such a pair the flow
+gain is kept: it is the baseline). A parameter that is not identified is reported as such and reset
+to its nominal value, the rest refitted; a misfit the calibration explains is a calibration finding
+(``Calibration.changes``), not an effect.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from . import output_error as oe
-from .parameters import FreeParameter, free_parameter
+from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from .record import Record
 from .simulation import Runner
+
+IDENTIFIED_RATIO = 3.0       # |value / sigma| of an identified parameter
+CORRELATION_LIMIT = 0.98     # |correlation| beyond which two freed parameters are one number to the data
+GRAVITY_SHARE = 0.05         # gravity torque over the record >= 5 % of the actuator's full torque: mass seen
+SUPPLY_SPAN = 1.5            # supply pressure within x/÷ 1.5 of nominal
+BULK_SPAN = 3.0              # oil bulk modulus within x/÷ 3
+FRICTION_SPAN = 10.0         # viscous friction within x/÷ 10
+
+# nominal parameter (kind) -> bank effects it can masquerade as
+MIMICS: dict[str, tuple[str, ...]] = {
+    "supply_pressure": ("payload", "valve_asymmetry", "area_ratio", "flow_saturation"),
+    "bulk_modulus": ("bulk_modulus", "line_dynamics", "joint_compliance"),
+    "viscous_friction": ("coulomb_friction", "stribeck_friction", "joint_compliance", "hysteresis"),
+    "payload_mass": ("payload", "coulomb_friction", "sensor_gain", "valve_asymmetry"),
+}
 
 
 def default_free(spec, rec: Record) -> list[str]:
     return [f"joints.{j}.valve.rated_flow" for j in rec.targets]
+
+
+def estimated_ranges(spec) -> dict[str, tuple[float, float]]:
+    """The spec's estimated parameters, path -> (lo, hi); {} for a spec that marks none."""
+    est = getattr(spec, "estimated", None) or {}
+    out = {}
+    for k, v in dict(est).items():
+        lo, hi = (float(x) for x in v)
+        out[str(k)] = (min(lo, hi), max(lo, hi))
+    return out
+
+
+@dataclass
+class Plan:
+    """What a calibration frees, and why; nominal parameters it leaves alone, and why."""
+
+    free: list[FreeParameter]
+    why: dict[str, str]
+    held: dict[str, str] = field(default_factory=dict)
+    switched: list[tuple[str, str | None]] = field(default_factory=list)   # effects switched on (name, joint)
+
+    @property
+    def keys(self) -> list[str]:
+        return [fp.key for fp in self.free]
+
+
+def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str] | None = None) -> Plan:
+    """The calibration's free parameters for ``spec`` (a model spec; effect parameters it frees are
+    switched on in it) on ``rec``. ``effects``: the candidate bank searched afterwards (None: every
+    effect); ``keys``: an explicit list instead of the default rule (``hydrohil fit --free``)."""
+    from ..effects import EFFECTS
+
+    if keys is not None:
+        return Plan([free_parameter(spec, k) for k in keys], {k: "chosen (--free)" for k in keys})
+    bank = set(EFFECTS if effects is None else effects)
+    free: list[FreeParameter] = []
+    why: dict[str, str] = {}
+    held: dict[str, str] = {}
+    switched: list[tuple[str, str | None]] = []
+
+    def add(fp: FreeParameter, reason: str):
+        if fp.key not in why:
+            free.append(fp)
+            why[fp.key] = reason
+
+    for key, (lo, hi) in estimated_ranges(spec).items():
+        try:
+            fp = _estimated(spec, rec, key, lo, hi, switched)
+        except (FreeParameterError, ValueError) as exc:
+            held[key] = f"marked estimated but not fitted: {exc}"
+            continue
+        if fp is not None:
+            add(fp, f"estimated in the spec, range [{lo:g}, {hi:g}]")
+    estimated = set(why)
+    for k in default_free(spec, rec):
+        add(free_parameter(spec, k), "valve flow gain (the baseline)")
+
+    def competing(kind: str) -> list[str]:
+        return [e for e in MIMICS[kind] if e in bank]
+
+    def consider(key: str, kind: str, make, reason: str):
+        if key in estimated or key in why:
+            return
+        rivals = competing(kind)
+        if rivals:
+            held[key] = f"held at nominal: could masquerade as {', '.join(rivals)} (mark it estimated to free it)"
+            return
+        fp = make()
+        if fp is not None:
+            add(fp, reason)
+
+    if rec.has_pressures:
+        consider("supply.pressure", "supply_pressure", lambda: _span(spec, "supply.pressure", SUPPLY_SPAN),
+                 "pressures recorded")
+        consider("fluid.bulk_modulus", "bulk_modulus", lambda: _span(spec, "fluid.bulk_modulus", BULK_SPAN),
+                 "pressures recorded")
+    for j in rec.targets:
+        js = spec.joint(j)
+        key = f"joints.{j}.{js.kind}.viscous_friction"
+        if spec.get(key) > 0:
+            consider(key, "viscous_friction", lambda key=key: _span(spec, key, FRICTION_SPAN), "the joint moves")
+        key = f"effects.payload.{j}.mass"
+        if key not in why and (competing("payload_mass") or gravity_share(spec, rec, j) >= GRAVITY_SHARE):
+            consider(key, "payload_mass", lambda j=j: _payload(spec, j, switched), "the record carries a gravity load")
+    return Plan(free, why, held, switched)
+
+
+def _span(spec, key: str, span: float) -> FreeParameter:
+    return free_parameter(spec, key, span=span)
+
+
+def _payload(spec, joint: str, switched) -> FreeParameter:
+    from ..effects import EFFECTS
+
+    hints = EFFECTS["payload"].candidate(spec, joint, {}, {}, None)
+    _, lo, hi, _, _, unit = hints["free"][0]
+    if not any(e.name == "payload" and e.joint == joint for e in spec.effects):
+        spec.enable_effect("payload", joint, mass=0.0)
+        switched.append(("payload", joint))
+    return FreeParameter(f"effects.payload.{joint}.mass", float(lo), float(hi), unit=unit, null=0.0)
+
+
+def _estimated(spec, rec: Record, key: str, lo: float, hi: float, switched) -> FreeParameter | None:
+    """A free parameter for an estimated path. A sensor calibration (``joints.<j>.sensor.A``/``B``)
+    is fitted as the sensor gain/offset effect it causes: the record was converted with the spec's
+    A and B, the model reads back with the same, so the error shows as y = g q + c with g = A / A_true,
+    c = B - B_true."""
+    parts = key.split(".")
+    if len(parts) == 4 and parts[0] == "joints" and parts[2] == "sensor" and parts[3] in ("A", "B"):
+        j = parts[1]
+        if j not in rec.angles:
+            return None
+        nominal = float(spec.get(key))
+        if parts[3] == "A":
+            if nominal == 0 or lo * nominal <= 0 or hi * nominal <= 0:
+                raise ValueError(f"a sensor gain range must have the sign of A = {nominal:g}, got [{lo:g}, {hi:g}]")
+            name, pname, a, b, null = "sensor_gain", "gain", nominal / hi, nominal / lo, 1.0
+        else:
+            name, pname, a, b, null = "sensor_offset", "offset", nominal - hi, nominal - lo, 0.0
+        if not any(e.name == name and e.joint == j for e in spec.effects):
+            spec.enable_effect(name, j, **{pname: null})
+            switched.append((name, j))
+        return FreeParameter(f"effects.{name}.{j}.{pname}", min(a, b), max(a, b), null=null)
+    if parts[0] == "effects":
+        declared(spec, key)
+        name, joint = parts[1], (parts[2] if len(parts) == 4 else None)
+        if not any(e.name == name and e.joint == joint for e in spec.effects):
+            spec.enable_effect(name, joint)
+            switched.append((name, joint))
+    p = declared(spec, key)
+    fp = FreeParameter(key, max(lo, p.lower), min(hi, p.upper), unit=p.unit)
+    if not fp.lower < fp.upper:
+        raise ValueError(f"range [{lo:g}, {hi:g}] leaves no room inside the parameter's bounds [{p.lower:g}, {p.upper:g}]")
+    fp.log = fp.lower > 0 and fp.upper / fp.lower > 3.0
+    v = fp.get(spec)
+    if not fp.lower <= v <= fp.upper:
+        fp.apply(spec, min(max(v, fp.lower), fp.upper))
+    return fp
+
+
+def gravity_share(spec, rec: Record, joint: str) -> float:
+    """Largest gravity torque on ``joint`` over the record's angles (other joints at their start),
+    as a share of the actuator's full-pressure torque: what a mass on it changes in the record."""
+    from ..plant import Plant
+    from .candidates import actuator_scales
+
+    if joint not in rec.angles:
+        return 0.0
+    try:
+        ctx = Plant(spec).create_context(seed=0)
+    except Exception:       # a spec the plant refuses is reported by the simulation, not here
+        return 0.0
+    tree = spec.tree
+    rb = ctx.rigid_body()
+    q = np.array(ctx.q, dtype=float)
+    for js in spec.joints:
+        if js.name in rec.initial_pose:
+            q[tree.index(js.dof)] = rec.initial_pose[js.name]
+    i = tree.index(spec.joint(joint).dof)
+    y = rec.angles[joint]
+    z = np.zeros(tree.n)
+    worst = 0.0
+    for v in np.linspace(float(np.min(y)), float(np.max(y)), 5):
+        q[i] = v
+        worst = max(worst, abs(float(rb.inverse_dynamics(q, z, z)[i])))
+    full = actuator_scales(spec, joint)["torque"]
+    return worst / full if full > 0 else 0.0
 
 
 @dataclass
@@ -26,20 +226,92 @@ class Calibration:
     spec: object                     # the calibrated model spec
     result: oe.FitResult
     free: list[FreeParameter]
+    changes: list[dict] = field(default_factory=list)   # one row per freed parameter (see ``calibrate``)
+    held: dict[str, str] = field(default_factory=dict)
+    switched: list[tuple[str, str | None]] = field(default_factory=list)
+
+    @property
+    def identified(self) -> list[str]:
+        return [c["parameter"] for c in self.changes if c["identified"]]
 
 
 # factors around the nominal flow gain tried before least squares
 SCAN_FACTORS = (0.5, 0.63, 0.8, 0.9, 1.1, 1.25, 1.6, 2.0)
 
 
-def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str], *, span: float = 10.0,
-              max_sims: int = 40, uncertainty: bool = True) -> Calibration:
-    """Fit ``keys`` of ``spec`` (a model spec) on the problem's channels, flow gains from the best
-    point of a coarse scan."""
-    free = [free_parameter(spec, k, span=span) for k in keys]
+def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None = None, *, span: float = 10.0,
+              max_sims: int = 40, uncertainty: bool = True, free: list[FreeParameter] | None = None,
+              why: dict[str, str] | None = None) -> Calibration:
+    """Fit ``keys`` (or the ready ``free`` parameters, e.g. a :class:`Plan`'s) of ``spec`` (a model
+    spec) on the problem's channels, flow gains from the best point of a coarse scan; then check each
+    one's identifiability (see the module docstring), reset those the record cannot identify to
+    their nominal values and refit the rest. ``changes`` rows: parameter, nominal, fitted, sigma,
+    identified, value (what the calibrated spec holds), unit, why (freed) and, when not identified,
+    the reason."""
+    if free is None:
+        free = [free_parameter(spec, k, span=span) for k in keys or []]
+    keys = [fp.key for fp in free]
+    nominal = {fp.key: fp.get(spec) for fp in free}
     start = scan_flow_gains(spec, runner, problem, keys)
-    res = oe.fit(runner, problem, start, free, max_sims=max_sims, uncertainty=uncertainty)
-    return Calibration(res.spec, res, free)
+    budget = max_sims + 4 * max(0, len(free) - len([k for k in keys if k.endswith(".valve.rated_flow")]))
+    res = oe.fit(runner, problem, start, free, max_sims=budget, uncertainty=uncertainty)
+    if not uncertainty or not res.ok:
+        changes = [_row(fp, nominal, res, res, None, why) for fp in free]
+        return Calibration(res.spec, res, free, changes)
+    verdict = identifiability(res)
+    keep = [fp for fp in free if verdict[fp.key] is None]
+    final, cal_spec = res, res.spec
+    if len(keep) < len(free):
+        reset = spec.copy()
+        for fp in free:
+            fp.apply(reset, res.values[fp.key] if verdict[fp.key] is None else nominal[fp.key])
+        if keep:
+            final = oe.fit(runner, problem, reset, keep, max_sims=2 * (len(keep) + 1) + 4, uncertainty=True, tol=1e-3)
+            cal_spec = final.spec
+        else:
+            cal_spec = reset
+    changes = [_row(fp, nominal, res, final, verdict[fp.key], why) for fp in free]
+    final.spec = cal_spec
+    return Calibration(cal_spec, final, free, changes)
+
+
+def identifiability(res: oe.FitResult) -> dict[str, str | None]:
+    """Per freed parameter: None when identified, else why not (|value/sigma| < 3, or a correlation
+    beyond CORRELATION_LIMIT with another freed parameter; of a correlated pair the flow gain stays)."""
+    out: dict[str, str | None] = {}
+    keys = [fp.key for fp in res.free]
+    for k in keys:
+        v, s = res.values[k], res.sigma.get(k, math.inf)
+        ratio = abs(v) / s if s > 0 and math.isfinite(s) else (math.inf if s == 0 else 0.0)
+        out[k] = None if ratio >= IDENTIFIED_RATIO else f"|value/sigma| = {ratio:.2g} < {IDENTIFIED_RATIO:g}"
+    C = res.correlation
+    if C is not None:
+        order = sorted(range(len(keys)), key=lambda i: keys[i].endswith(".valve.rated_flow"))
+        for a in order:            # flow gains last: the other member of a pair is the one dropped
+            if out[keys[a]] is not None:
+                continue
+            for b in range(len(keys)):
+                if b == a or out[keys[b]] is not None:
+                    continue
+                r = C[a, b]
+                if np.isfinite(r) and abs(r) > CORRELATION_LIMIT:
+                    out[keys[a]] = f"correlation {r:+.3f} with {keys[b]}: the record cannot tell them apart"
+                    break
+    return out
+
+
+def _row(fp: FreeParameter, nominal: dict, first: oe.FitResult, final: oe.FitResult, reason: str | None,
+         why: dict[str, str] | None) -> dict:
+    identified = reason is None
+    src = final if identified and fp.key in final.values else first
+    v_fit = float(src.values.get(fp.key, nominal[fp.key]))
+    row = {"parameter": fp.key, "nominal": float(nominal[fp.key]), "fitted": v_fit,
+           "sigma": float(src.sigma.get(fp.key, math.nan)), "identified": identified,
+           "value": v_fit if identified else float(nominal[fp.key]), "unit": fp.unit,
+           "why": (why or {}).get(fp.key, "")}
+    if not identified:
+        row["not_identified_because"] = reason
+    return row
 
 
 def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str]):
@@ -67,3 +339,13 @@ def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str]):
                 best, best_v = c, v0 * f
         best_spec.set(key, best_v)
     return best_spec
+
+
+def format_changes(changes: list[dict]) -> list[str]:
+    """One line per freed parameter, for ``fit`` and the log."""
+    lines = []
+    for c in changes:
+        state = "identified" if c["identified"] else f"NOT identified ({c.get('not_identified_because')}), kept at nominal"
+        lines.append(f"  {c['parameter']}: nominal {c['nominal']:.6g}, fitted {c['fitted']:.6g} +- {c['sigma']:.3g} "
+                     f"{c['unit']}".rstrip() + f": {state}" + (f"  [{c['why']}]" if c.get("why") else ""))
+    return lines

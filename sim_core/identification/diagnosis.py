@@ -3,8 +3,10 @@
 The procedure (research note 'discrepancy catalog' §4):
 
 1. align and check the data (record.py): columns, start pose, noise floor, end-stop contact;
-2. baseline: calibrate the nominal flow gains by output error, simulate, compute the fits and the
-   residual tests;
+2. baseline: calibrate by output error what the record can identify and no effect of the bank could
+   stand for (calibration.py: the flow gains, the spec's estimated parameters, ...); parameters it
+   cannot identify stay nominal; simulate, compute the fits and the residual tests; say whether the
+   record was taken in closed loop (closed_loop.py);
 3. screening: signature statistics give initial guesses and the report's evidence (signatures.py);
 4. decision: fit every candidate, accept by validation gain, BIC and identifiability, greedily for
    several effects (selection.py); refit the result with the default integrator settings;
@@ -20,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import output_error as oe
-from .calibration import calibrate, default_free
+from .calibration import calibrate, plan
+from .closed_loop import detect as detect_closed_loop
 from .candidates import bank, decider
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter
@@ -56,6 +59,7 @@ class Diagnosis:
     ceiling: float
     notes: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    closed_loop: dict = field(default_factory=dict)   # closed_loop.detect's answer
 
     @property
     def verdict(self) -> str:
@@ -82,6 +86,8 @@ class Diagnosis:
             "validation": {"source": self.validation.source, "first_sample": self.split,
                            "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split)},
             "calibration": self.calibration,
+            "closed_loop": bool(self.closed_loop.get("closed_loop", False)),
+            "closed_loop_evidence": self.closed_loop,
             "data": self.check.to_dict() | {"targets": self.record.targets, "pressures": self.record.has_pressures,
                                             "notes": self.notes},
             "numerics": self.numerics,
@@ -158,14 +164,23 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     accurate, vaccurate = Runner(rec), Runner(vrec)
     timings["numerics"] = time.perf_counter() - t_start
 
-    # baseline: calibrate the nominal flow gains
-    keys = default_free(spec, rec)
-    log(f"calibrating {', '.join(keys)}")
+    # baseline: calibrate what the record identifies and no candidate effect could stand for
+    pl = plan(m0, rec, effects)
+    log(f"calibrating {', '.join(pl.keys)}")
     if not fast.simulate(m0, est.n).ok:
         raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
                          f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
-    cal = calibrate(m0, fast, est, keys)
+    cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
     base_fast = cal.spec
+    for c in cal.changes:
+        if not c["identified"]:
+            log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
+    # the candidates refit the identified model parameters with themselves (an effect parameter the
+    # calibration switched on stays at its calibrated value: the candidate of that effect refits it)
+    keys = [k for k in cal.identified if not k.startswith("effects.")]
+    loop = detect_closed_loop(rec, spec)
+    if loop["closed_loop"]:
+        notes.append(loop["note"])
     timings["baseline"] = time.perf_counter() - t_start
 
     # screening on the estimation data
@@ -266,13 +281,17 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "noise_spread": round(ev.spread, 4), "simulations": ev.sims,
             })
 
-    calib = {"free": keys, "values": dict(cal.result.values), "sigma": cal.result.sigma, "ci95": cal.result.ci95}
+    calib = {"free": pl.keys, "values": {c["parameter"]: c["value"] for c in cal.changes},
+             "sigma": {c["parameter"]: c["sigma"] for c in cal.changes}, "ci95": dict(cal.result.ci95),
+             "changes": cal.changes, "held": pl.held,
+             "identified": cal.identified, "not_identified": [c["parameter"] for c in cal.changes if not c["identified"]],
+             "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched]}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
-                     {k: round(v, 2) for k, v in timings.items()})
+                     {k: round(v, 2) for k, v in timings.items()}, loop)
 
 
 def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, prob: oe.Problem) -> list[float]:

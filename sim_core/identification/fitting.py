@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import output_error as oe
-from .calibration import default_free, scan_flow_gains
+from .calibration import identifiability, plan, scan_flow_gains
 from .metrics import noise_std
-from .parameters import FreeParameterError, declared, free_parameter
+from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
 from .record import Record
 from .simulation import Runner, choose_numerics, model_spec
@@ -82,26 +82,57 @@ def _fits(prob: oe.Problem, before, after, rec: Record) -> dict:
     return res
 
 
+def _narrowed(fp: FreeParameter, v: float, span: float) -> FreeParameter:
+    """``fp`` within x/÷ ``span`` of ``v``, inside its own bounds (the polish step's search range)."""
+    return FreeParameter(fp.key, max(fp.lower, v / span), min(fp.upper, v * span), log=True, null=fp.null, unit=fp.unit)
+
+
 def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = None, max_sims: int = 80,
             out: str | None = None) -> dict:
-    keys = list(keys or default_free(spec, rec))
+    """Fit ``keys`` (default: the baseline calibration's plan, see calibration.py) and check each
+    one's identifiability: a parameter the record does not identify is reported and written at its
+    nominal value, the others refitted without it."""
     spec = spec.copy()
-    switched = prepare_keys(spec, keys)
-    m0 = model_spec(spec)
-    free = [free_parameter(m0, k) for k in keys]      # validates every key (clear errors)
+    if keys:
+        keys = list(keys)
+        switched = prepare_keys(spec, keys)
+        m0 = model_spec(spec)
+        free = [free_parameter(m0, k) for k in keys]      # validates every key (clear errors)
+        why = {k: "chosen (--free)" for k in keys}
+        held: dict[str, str] = {}
+    else:
+        m0 = model_spec(spec)
+        pl = plan(m0, rec)
+        for name, joint in pl.switched:                   # the written file carries them too
+            spec.enable_effect(name, joint, **next(e.params for e in m0.effects if e.name == name and e.joint == joint))
+        switched = [f"{n}@{j}" if j else n for n, j in pl.switched]
+        free, keys, why, held = pl.free, pl.keys, pl.why, pl.held
+    nominal = {fp.key: fp.get(m0) for fp in free}
     targets = rec.targets
     prob = oe.Problem(rec, targets)
     fast, numerics = choose_numerics(m0, rec)
     start = scan_flow_gains(m0, fast, prob, keys)      # least squares stalls on a jagged cost
     res = oe.fit(fast, prob, start, free, max_sims=max_sims, uncertainty=False)
     accurate = Runner(rec)
-    polish = [free_parameter(res.spec, k, span=1.5) if fp.log else fp for k, fp in zip(keys, free)]
+    polish = [_narrowed(fp, res.values[fp.key], 1.5) if fp.log else fp for fp in free]
     final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
+    fitted = final
+    verdict = identifiability(final) if final.ok else {k: None for k in keys}
+    if any(v is not None for v in verdict.values()):
+        reset = final.spec.copy()
+        for fp in polish:
+            if verdict[fp.key] is not None:
+                fp.apply(reset, nominal[fp.key])
+        keep = [fp for fp in polish if verdict[fp.key] is None]
+        if keep:
+            final = oe.fit(accurate, prob, reset, keep, max_sims=2 * (len(keep) + 1) + 4, tol=1e-3)
+        else:
+            final = oe.FitResult([], {}, fitted.cost, spec=reset, sims=0)
     before = accurate.simulate(m0)
     after = accurate.simulate(final.spec)
     result = {
-        "robot": spec.name, "source": rec.source, "simulations": res.sims + final.sims, "numerics": numerics,
-        "switched_on": switched,
+        "robot": spec.name, "source": rec.source, "simulations": res.sims + fitted.sims + (final.sims if final is not fitted else 0),
+        "numerics": numerics, "switched_on": switched,
         "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)},
     }
     if val is not None:
@@ -111,14 +142,26 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
         vprob = oe.Problem(val, targets)
         vr = Runner(val)
         result["fit"][val.source] = _fits(vprob, vr.simulate(m0), vr.simulate(final.spec), val)
+    changes = []
     for fp, k in zip(polish, keys):
-        v = final.values[k]
-        result["parameters"][k] = {"value": v, "initial": free[keys.index(k)].get(m0), "sigma": final.sigma.get(k, float("nan")),
-                                   "ci95": final.ci95.get(k, [v, v]), "unit": fp.unit, "at_bound": final.at_bound(k)}
+        ok = verdict[k] is None
+        src = final if ok and k in final.values else fitted
+        v_fit = src.values[k]
+        v = v_fit if ok else nominal[k]
+        result["parameters"][k] = {"value": v, "initial": nominal[k], "sigma": src.sigma.get(k, float("nan")),
+                                   "ci95": src.ci95.get(k, [v, v]), "unit": fp.unit, "at_bound": src.at_bound(k),
+                                   "fitted": v_fit, "identified": ok}
+        row = {"parameter": k, "nominal": nominal[k], "fitted": v_fit, "sigma": src.sigma.get(k, float("nan")),
+               "identified": ok, "value": v, "unit": fp.unit, "why": why.get(k, "")}
+        if not ok:
+            row["not_identified_because"] = verdict[k]
+            result["parameters"][k]["not_identified_because"] = verdict[k]
+        changes.append(row)
+    result["calibration"] = {"changes": changes, "held": held}
     if out:
         configured = spec.copy()
         for k in keys:
-            free[keys.index(k)].apply(configured, final.values[k])
+            free[keys.index(k)].apply(configured, result["parameters"][k]["value"])
         data = overrides(configured)
         data["diagnosis"] = {"generated_by": "hydrohil fit", "source": rec.source, "free": keys,
                              "sigma": {k: p["sigma"] for k, p in result["parameters"].items()},

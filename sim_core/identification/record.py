@@ -1,6 +1,14 @@
 """A measured record prepared for identification: columns checked against the robot, the split into
 estimation and validation data, the initial pose, and the data checks every later step relies on
 (sample rate, noise floor, end-stop contact, which joints are excited and measured).
+
+The start pose comes from the record (policy 'auto' or 'data'): a real arm starts wherever it was
+left, and a model started elsewhere carries the difference through the whole record as if the
+sensor were offset. What the record gives is the first *reading*; the simulation starts at the joint
+position the model's sensor (with its gain and offset effects) reads as that value
+(:func:`start_position`), so a sensor offset is still a property of the sensor, identified from what
+depends on the true pose (gravity load, lever arms, end stops), not from where the record starts.
+'spec' (``--initial-pose spec``) starts every joint at the robot's ``initial_position`` instead.
 """
 
 from __future__ import annotations
@@ -17,7 +25,7 @@ from .metrics import fit_ceiling, noise_std
 ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
 MIN_SAMPLES = 50
 MIN_DURATION = 2.0          # s
-INITIAL_POSE_TOLERANCE = 0.1  # rad: further from the spec's pose, the record started elsewhere
+START_WINDOWS = (0.02, 0.05, 0.1, 0.2, 0.5)   # s: spans the start reading is fitted over (first_reading)
 END_STOP_MARGIN = 0.01      # rad: closer to a joint limit counts as end-stop contact
 
 
@@ -32,8 +40,9 @@ class Record:
     pressures: dict[str, tuple[np.ndarray, np.ndarray]]  # (p_a, p_b) per joint with both columns
     joint_names: list[str]
     excited: list[str]                    # actuated joints whose command moves
-    initial_pose: dict[str, float]        # joint -> angle the simulation starts from
+    initial_pose: dict[str, float]        # joint -> start angle: a reading (pose_kind 'reading') or the pose
     notes: list[str] = field(default_factory=list)
+    pose_kind: str = "reading"            # 'reading': initial_pose holds first readings; 'true': joint positions
 
     @property
     def n(self) -> int:
@@ -63,7 +72,7 @@ class Record:
         """The first ``n`` samples (estimation part of a single record)."""
         return Record(self.source, self.time[:n], self.U[:n], {k: v[:n] for k, v in self.angles.items()},
                       {k: (a[:n], b[:n]) for k, (a, b) in self.pressures.items()}, self.joint_names,
-                      self.excited, self.initial_pose, self.notes)
+                      self.excited, self.initial_pose, self.notes, self.pose_kind)
 
 
 @dataclass
@@ -138,40 +147,88 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
             f"({', '.join('q_' + j for j in excited)})"
         )
     pose = _initial_pose(spec, angles, t, initial_pose, notes)
-    return Record(source, t, U, angles, pressures, list(spec.joint_names), excited, pose, notes)
+    return Record(source, t, U, angles, pressures, list(spec.joint_names), excited, pose, notes,
+                  "true" if initial_pose == "spec" else "reading")
 
 
 def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, float]:
-    """Where the simulation starts. 'spec': the robot's initial positions; 'data': the first measured
-    angles; 'auto': the spec's unless the record starts more than INITIAL_POSE_TOLERANCE away (then a
-    sensor offset could not be told from another start pose, and the data's pose is used)."""
+    """Where the simulation starts. 'auto' and 'data': the record's first reading of each measured
+    joint (:func:`first_reading`; joints without a sensor start at the spec's position); 'spec': the
+    robot's initial positions."""
     if policy not in ("auto", "spec", "data"):
         raise ValueError(f"--initial-pose {policy!r}: expected auto, spec or data")
     pose: dict[str, float] = {}
-    head = max(3, int(np.searchsorted(t, 0.02)))
     tree = spec.tree
     for j in spec.joint_names:
         q_spec = float(spec.joint(j).settings["initial_position"])
         pose[j] = q_spec
-        if j not in angles:
+        if j not in angles or policy == "spec":
             continue
-        q_meas = float(np.median(angles[j][:head]))
-        far = abs(q_meas - q_spec) > INITIAL_POSE_TOLERANCE
-        if policy == "data" or (policy == "auto" and far):
-            i = tree.index(spec.joint(j).dof)
-            lo, hi = float(tree.lower[i]), float(tree.upper[i])
-            inside = min(max(q_meas, lo + END_STOP_MARGIN), hi - END_STOP_MARGIN) if lo < hi else q_meas
-            if inside != q_meas:
-                notes.append(f"{j}: the record starts at {q_meas:.3f} rad, outside the joint's range [{lo:.3f}, {hi:.3f}] "
-                             f"rad (check the units, rad, and the sensor calibration); the simulation starts at {inside:.3f}")
-                q_meas = inside
-            pose[j] = q_meas
-            if policy == "auto":
-                notes.append(
-                    f"{j}: the record starts at {q_meas:.3f} rad, {q_meas - q_spec:+.3f} rad from the model's initial "
-                    f"position; the simulation starts there (a sensor offset cannot be told from another start pose)"
-                )
+        q_meas, se = first_reading(t, angles[j])
+        i = tree.index(spec.joint(j).dof)
+        lo, hi = float(tree.lower[i]), float(tree.upper[i])
+        inside = min(max(q_meas, lo + END_STOP_MARGIN), hi - END_STOP_MARGIN) if lo < hi else q_meas
+        if inside != q_meas:
+            notes.append(f"{j}: the record starts at {q_meas:.3f} rad, outside the joint's range [{lo:.3f}, {hi:.3f}] "
+                         f"rad (check the units, rad, and the sensor calibration); the simulation starts at {inside:.3f}")
+            q_meas = inside
+        pose[j] = q_meas
+        if abs(q_meas - q_spec) > 1e-3:
+            notes.append(f"{j}: the record starts at {q_meas:.4f} rad (+-{se:.1e} from its first readings), "
+                         f"{q_meas - q_spec:+.3f} rad from the model's initial position; the simulation starts there")
     return pose
+
+
+def first_reading(t: np.ndarray, y: np.ndarray, noise: float | None = None) -> tuple[float, float]:
+    """The reading at t = 0 and its standard error. Over ever longer START_WINDOWS the lowest-degree
+    polynomial (0-2) whose residual is consistent with the sensor noise (chi-square, 3 sigma) is
+    fitted; the window grows while its value at t = 0 agrees with the shorter window's (within two
+    of its standard errors): a joint at rest averages its noise over up to 0.5 s, a joint that
+    starts moving at once keeps the short fit (a long one is biased by the start transient)."""
+    y = np.asarray(y, dtype=float)
+    s = noise_std(y) if noise is None else noise
+    if y.size < 3 or not s > 1e-12 * max(1.0, float(np.max(np.abs(y[:10])))):
+        return float(y[0]), 0.0
+    tt = t - t[0]
+    best: tuple[float, float] | None = None
+    for w in START_WINDOWS:
+        n = min(y.size, int(np.searchsorted(tt, w, side="right")))
+        est = None
+        for deg in (0, 1, 2):
+            dof = n - deg - 1
+            if dof < 2:
+                continue
+            A = np.vander(tt[:n] / max(tt[n - 1], 1e-12), deg + 1, increasing=True)
+            coef, *_ = np.linalg.lstsq(A, y[:n], rcond=None)
+            r = y[:n] - A @ coef
+            if float(r @ r) / s ** 2 <= dof + 3.0 * math.sqrt(2.0 * dof):
+                est = (float(coef[0]), s * math.sqrt(float(np.linalg.inv(A.T @ A)[0, 0])))
+                break
+        if est is None or (best is not None and abs(est[0] - best[0]) > 2.0 * best[1]):
+            break
+        if best is None or est[1] < best[1]:
+            best = est
+        if n >= y.size:
+            break
+    return best if best is not None else (float(y[0]), s)
+
+
+def start_position(spec, rec: "Record", joint: str) -> float:
+    """The joint position a simulation of ``spec`` starts from on ``rec``: the position its sensor
+    reads as the record's first reading (sensor gain and offset effects inverted, y = g q + c), or
+    the recorded start pose itself when it is one (pose_kind 'true')."""
+    q0 = rec.initial_pose.get(joint)
+    if q0 is None:
+        return float(spec.joint(joint).settings["initial_position"])
+    if rec.pose_kind != "reading" or joint not in rec.angles:
+        return float(q0)
+    g, c = 1.0, 0.0
+    for e in spec.effects:
+        if e.joint == joint and e.name == "sensor_gain":
+            g = float(e.params["gain"])
+        elif e.joint == joint and e.name == "sensor_offset":
+            c = float(e.params["offset"])
+    return (float(q0) - c) / g
 
 
 def check_record(rec: Record, spec) -> DataCheck:
@@ -193,7 +250,7 @@ def check_record(rec: Record, spec) -> DataCheck:
         if out.any():
             rec.notes.append(f"q_{j}: {100 * out.mean():.0f} % of the samples lie more than 0.1 rad outside the joint's range "
                              f"[{lo:.3f}, {hi:.3f}] rad: check the units (rad) and the sensor calibration")
-        src[j] = "spec" if rec.initial_pose[j] == spec.joint(j).settings["initial_position"] else "data"
+        src[j] = "spec" if rec.pose_kind == "true" else "data"
         ceiling[j] = fit_ceiling(y, noise[j])
     for j in rec.excited:
         lo, hi = spec.joint(j).command_range

@@ -20,6 +20,7 @@ import numpy as np
 from ..effects import EFFECTS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
+from .record import start_position
 from .residual_tests import autocorrelation
 
 # where each effect typically shows (the legend of the highlighted evidence)
@@ -214,6 +215,7 @@ def html_report(d: Diagnosis, data: dict) -> str:
             if s.get("ambiguous"):
                 parts.append(f" <b class='bad'>Ambiguous</b>: the margin is under 20 %. What would decide: {e(s['decided_by'])}.")
             parts.append("</p>")
+    parts.append(_calibration_html(data))
     # fits
     parts.append("<h2>Fit on validation data (NRMSE %, angle)</h2><table><tr><th>joint</th><th>baseline</th>"
                  "<th>extended</th><th>baseline score</th><th>extended score</th></tr>")
@@ -271,11 +273,47 @@ def html_report(d: Diagnosis, data: dict) -> str:
     return "".join(parts)
 
 
+def _calibration_html(data: dict) -> str:
+    """What the baseline calibration changed (and could not identify), and the closed-loop finding."""
+    e = html.escape
+    cal = data["calibration"]
+    parts = ["<h2>Baseline calibration</h2><p>Freed before any effect was tried; a parameter the record does not "
+             "identify (|value/sigma| &lt; 3, or tied to another by their correlation) is kept at its nominal value.</p>",
+             "<table><tr><th>parameter</th><th>nominal</th><th>fitted</th><th>sigma</th><th>identified</th><th>used</th>"
+             "<th>why freed</th></tr>"]
+    for c in cal.get("changes", []):
+        ident = "yes" if c["identified"] else f"no: {c.get('not_identified_because', '')}"
+        parts.append(f"<tr><td>{e(c['parameter'])}</td><td>{_fmt(c['nominal'])}</td><td>{_fmt(c['fitted'])}</td>"
+                     f"<td>{_fmt(c['sigma'])}</td><td class='{'ok' if c['identified'] else 'bad'}'>{e(ident)}</td>"
+                     f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}</td><td>{e(c.get('why', ''))}</td></tr>")
+    parts.append("</table>")
+    if cal.get("held"):
+        parts.append("<details><summary>nominal parameters not freed</summary><ul>"
+                     + "".join(f"<li>{e(k)}: {e(v)}</li>" for k, v in cal["held"].items()) + "</ul></details>")
+    loop = data.get("closed_loop_evidence") or {}
+    if data.get("closed_loop"):
+        parts.append(f"<h2>Closed-loop record</h2><p>{e(loop.get('note', ''))}.</p>")
+    if loop.get("joints"):
+        rows = "".join(f"<tr><td>{e(j)}</td><td>{_fmt(v['correlation'])}</td><td>{_fmt(v['gain'])}</td>"
+                       f"<td>{_fmt(v['explained'])}</td><td>{'yes' if v['closed_loop'] else 'no'}</td></tr>"
+                       for j, v in loop["joints"].items())
+        parts.append(f"<details><summary>closed-loop test ({e(loop.get('rule', ''))})</summary><table><tr><th>joint</th>"
+                     f"<th>correlation</th><th>K</th><th>share explained</th><th>closed loop</th></tr>{rows}</table></details>")
+    return "".join(parts)
+
+
 def extended_params(d: Diagnosis, configured_spec) -> dict:
     """The extended model as a parameter/effect file relative to the robot's built-in spec."""
     spec = configured_spec.copy()
     for k, v in d.calibration["values"].items():
-        spec.set(k, d.extended_spec.get(k))
+        if k not in d.calibration.get("identified", d.calibration["values"]):
+            continue
+        if k.startswith("effects."):
+            name, joint = k.split(".")[1], (k.split(".")[2] if k.count(".") == 3 else None)
+            inst = next(e for e in d.extended_spec.effects if e.name == name and e.joint == joint)
+            spec.enable_effect(name, joint, **inst.params)
+        else:
+            spec.set(k, d.extended_spec.get(k))
     for s in d.selected:
         inst = next(e for e in d.extended_spec.effects if e.name == s["effect"] and e.joint == s["joint"])
         params = dict(inst.params)
@@ -283,7 +321,7 @@ def extended_params(d: Diagnosis, configured_spec) -> dict:
         spec.enable_effect(s["effect"], s["joint"], **params)
     for j, src in d.check.initial_pose_source.items():
         if src == "data":
-            spec.set(f"joints.{j}.initial_position", d.record.initial_pose[j])
+            spec.set(f"joints.{j}.initial_position", start_position(d.extended_spec, d.record, j))
     data = overrides(spec)
     data["diagnosis"] = {
         "generated_by": "hydrohil diagnose", "source": d.record.source, "validation": d.validation.source,
@@ -324,6 +362,13 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
         lines.append("")
+    if data.get("closed_loop"):
+        lines += [f"Closed-loop record: {data['closed_loop_evidence'].get('note', '')}.", ""]
+    lines += ["| calibrated | nominal | fitted | sigma | identified |", "|---|---|---|---|---|"]
+    for c in data["calibration"].get("changes", []):
+        lines.append(f"| {c['parameter']} | {_fmt(c['nominal'])} | {_fmt(c['fitted'])} | {_fmt(c['sigma'])} | "
+                     f"{'yes' if c['identified'] else 'no (kept nominal)'} |")
+    lines.append("")
     lines.append("| joint | baseline fit | extended fit |")
     lines.append("|---|---|---|")
     for j, f in d.baseline_fits.items():

@@ -16,7 +16,7 @@ import numpy as np
 from ..plant import Plant
 from ..simulator import SimulationError, Simulator
 from .metrics import nrmse_fit, velocity
-from .record import Record
+from .record import Record, start_position
 
 FAST_SUBSTEPS = (2e-3, 1e-3, 5e-4)   # s, tried coarsest first (the built-in robots use 0.25 ms)
 ANGLE_TOLERANCE = 0.25       # fit points of angle the fast substep may cost against the default
@@ -57,7 +57,7 @@ class Runner:
         n = rec.n if n is None else n
         s = spec if owned else spec.copy()
         for j in s.joints:   # start where this record starts
-            j.settings.set("initial_position", rec.initial_pose.get(j.name, j.settings["initial_position"]))
+            j.settings.set("initial_position", start_position(s, rec, j.name))
         if self.substep is not None and spec.integrator["max_substep"] < self.substep:
             s.set("integrator.max_substep", self.substep)
         self.calls += 1

@@ -1,0 +1,83 @@
+"""Is the record closed loop? A controller that computed the command from the measured position.
+
+Under feedback ``u = K (r - y)`` from the position reading ``y``, every change of the reading (the
+sensor's noise included) reaches the command at once: sample to sample, ``du = -K dy`` wherever the
+reference holds or moves smoothly. In open loop the command is exogenous: a PRBS or a joystick does
+not follow the sensor's noise, and a signal and its own derivative are uncorrelated. The test
+therefore correlates the command's increments with the reading's, at lags 0 to ``MAX_LAG`` samples
+(a controller that logs the reading one sample before it acts), leaving out the largest command
+jumps (reference steps, PRBS switches) and samples at the command limits (saturation cuts the loop).
+Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
+and the share of the command's increments ``-K dy`` explains.
+
+What it means for the diagnosis: the recorded command is what the valve saw, so it stays the model's
+input and output-error fits are valid; but the loop shapes what the record shows. A delay appears
+as phase (a lag between command and motion, a loop that rings), not as a dead time after steps; a
+deadband appears as limit cycles or a standing error around the reference, not as a stall at small
+commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .record import Record
+
+MAX_LAG = 2               # samples between the reading and the command it causes
+JUMP_QUANTILE = 0.95      # command increments above this quantile of |du| are left out (steps, switches)
+CORRELATION_LIMIT = -0.5  # correlation of du and dy at or below this: feedback
+
+NOTE = ("the record was taken in closed loop ({joints}): the command follows -K (q - r) with a smooth reference r. "
+        "The recorded command is what the valve saw and stays the model's input; but a delay shows as phase (a lag "
+        "between command and motion, a ringing loop) rather than as dead time after steps, and a deadband as limit "
+        "cycles or a standing error around the reference rather than a stall at small commands; the loop's narrow "
+        "excitation widens their intervals")
+
+
+def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
+    """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
+    the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False}
+    if u.size < 10:
+        return none
+    du, dy = np.diff(u), np.diff(y)
+    keep = np.ones(du.size, dtype=bool)
+    if command_range is not None:
+        lo, hi = command_range
+        span = 1e-6 * max(hi - lo, 1.0)
+        inside = (u > lo + span) & (u < hi - span)
+        keep &= inside[1:] & inside[:-1]
+    big = np.abs(du)
+    if keep.any():
+        keep &= big <= np.quantile(big[keep], JUMP_QUANTILE)
+    best = none
+    for lag in range(MAX_LAG + 1):
+        a = du[lag:][keep[lag:]]
+        b = dy[: dy.size - lag][keep[lag:]]
+        if a.size < 10:
+            continue
+        a, b = a - a.mean(), b - b.mean()
+        sa, sb = float(np.sqrt(a @ a)), float(np.sqrt(b @ b))
+        if sa <= 0 or sb <= 0:
+            continue
+        rho = float(a @ b) / (sa * sb)
+        if rho < best["correlation"]:
+            best = {"correlation": round(rho, 4), "gain": -float(a @ b) / float(b @ b), "lag_samples": lag,
+                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT}
+    return best
+
+
+def detect(rec: Record, spec=None) -> dict:
+    """Per commanded, measured joint: the evidence; ``closed_loop`` when any joint shows feedback,
+    with the note for the report."""
+    ranges = {j: (spec.joint(j).command_range if spec is not None else None) for j in rec.targets}
+    joints = {j: joint_evidence(rec.u(j), rec.angles[j], ranges[j]) for j in rec.targets}
+    closed = [j for j, e in joints.items() if e["closed_loop"]]
+    out = {"closed_loop": bool(closed), "joints": joints,
+           "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "
+                   f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}"}
+    if closed:
+        out["note"] = NOTE.format(joints=", ".join(f"{j}: correlation {joints[j]['correlation']:+.2f}, K = "
+                                                   f"{joints[j]['gain']:.3g} V per rad (or m)" for j in closed))
+    return out

@@ -1,0 +1,237 @@
+"""The baseline calibration of fit and diagnose: what it frees (and why not), what it can identify,
+what it resets, and the start pose taken from the record."""
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from sim_core.dataset import Dataset
+from sim_core.excitation import multilevel_prbs
+from sim_core.identification import output_error as oe
+from sim_core.identification.calibration import IDENTIFIED_RATIO, calibrate, identifiability, plan
+from sim_core.identification.parameters import FreeParameter
+from sim_core.identification.record import first_reading, record_from_dataset, start_position
+from sim_core.identification.simulation import Runner, choose_numerics, model_spec
+from sim_core.model.spec import load_robot
+from sim_core.plant import Plant
+from sim_core.simulator import Simulator
+
+NOMINAL_SUPPLY = 14.0e6      # hydrolek robot.toml
+TRUE_SUPPLY = 12.6e6         # -10 %
+TRUE_FRICTION = 2500.0       # N s/m on j2 (nominal 1500)
+
+
+def simulated(truth, joint="j2", duration=20.0, seed=3, pressures=True, rest=0.0):
+    """A PRBS record of ``truth`` (200 Hz), the command held at 0 V for the first ``rest`` s."""
+    t, U = multilevel_prbs(truth, joint, levels=5, amplitude=6, duration=duration, rate=200, seed=seed)
+    U[t < rest] = 0.0
+    cols = Simulator(Plant(truth).create_context(seed=1)).run(t, U).dataset_columns()
+    if not pressures:
+        cols = {k: v for k, v in cols.items() if not k.startswith("p_")}
+    return Dataset(list(cols), np.column_stack(list(cols.values())))
+
+
+@pytest.fixture(scope="module")
+def off_nominal():
+    """A hydrolek shoulder record whose supply is 10 % low and whose seals rub 2/3 more than the
+    nominal model says; pressures recorded."""
+    truth = load_robot("hydrolek")
+    truth.set("supply.pressure", TRUE_SUPPLY)
+    truth.set("joints.j2.cylinder.viscous_friction", TRUE_FRICTION)
+    return simulated(truth)
+
+
+# ---- what is freed ------------------------------------------------------------------------------
+
+def test_built_in_robot_frees_only_what_no_effect_of_the_bank_can_stand_for(off_nominal):
+    spec = load_robot("hydrolek")
+    rec = record_from_dataset(off_nominal, spec, source="rec")
+    full = plan(model_spec(spec), rec)
+    assert full.keys == ["joints.j2.valve.rated_flow"]
+    assert "coulomb_friction" in full.held["joints.j2.cylinder.viscous_friction"]
+    assert "bulk_modulus" in full.held["fluid.bulk_modulus"]
+    assert "payload" in full.held["effects.payload.j2.mass"]
+    # with a bank that no longer competes, the record's pressures and gravity load free the rest
+    narrow = plan(model_spec(spec), rec, effects=["delay"])
+    assert set(narrow.keys) == {"joints.j2.valve.rated_flow", "supply.pressure", "fluid.bulk_modulus",
+                                "joints.j2.cylinder.viscous_friction", "effects.payload.j2.mass"}
+    assert narrow.why["supply.pressure"] == "pressures recorded"
+    # without pressures, neither supply pressure nor bulk modulus is freed
+    rec_np = record_from_dataset(simulated(load_robot("hydrolek"), duration=5.0, pressures=False), spec, source="np")
+    assert set(plan(model_spec(spec), rec_np, effects=["delay"]).keys) == {
+        "joints.j2.valve.rated_flow", "joints.j2.cylinder.viscous_friction", "effects.payload.j2.mass"}
+
+
+def test_estimated_parameters_are_freed_within_the_specs_range(off_nominal):
+    spec = load_robot("hydrolek")
+    rec = record_from_dataset(off_nominal, spec, source="rec")
+    m = model_spec(spec)
+    m.estimated = {"supply.pressure": (8e6, 20e6), "joints.j2.sensor.A": (0.55, 0.65),
+                   "joints.j2.sensor.B": (-2.9, -2.8), "joints.j2.nonsense.x": (0.0, 1.0)}
+    pl = plan(m, rec)
+    fps = {fp.key: fp for fp in pl.free}
+    assert (fps["supply.pressure"].lower, fps["supply.pressure"].upper) == (8e6, 20e6)
+    assert "estimated" in pl.why["supply.pressure"]
+    # a sensor calibration is fitted as the gain and offset effects it causes: g = A / A_true, c = B - B_true
+    A, B = spec.get("joints.j2.sensor.A"), spec.get("joints.j2.sensor.B")
+    g = fps["effects.sensor_gain.j2.gain"]
+    assert (g.lower, g.upper) == pytest.approx((A / 0.65, A / 0.55))
+    c = fps["effects.sensor_offset.j2.offset"]
+    assert (c.lower, c.upper) == pytest.approx((B + 2.8, B + 2.9))
+    assert {("sensor_gain", "j2"), ("sensor_offset", "j2")} <= set(pl.switched)
+    assert "joints.j2.nonsense.x" in pl.held and "joints.j2.nonsense.x" not in fps
+
+
+def test_estimated_reads_nothing_from_a_spec_without_the_table():
+    from sim_core.identification.calibration import estimated_ranges
+
+    spec = load_robot("hydrolek")
+    assert estimated_ranges(spec) == {}
+    spec.estimated = {"supply.pressure": [20e6, 10e6]}
+    assert estimated_ranges(spec) == {"supply.pressure": (10e6, 20e6)}
+
+
+# ---- identifiability ----------------------------------------------------------------------------
+
+def _result(values, sigma, corr=None):
+    free = [FreeParameter(k, 1e-9, 1e9) for k in values]
+    return oe.FitResult(free, dict(values), 0.0, sigma=dict(sigma), correlation=None if corr is None else np.array(corr))
+
+
+def test_identifiability_rule():
+    flow, ps = "joints.j2.valve.rated_flow", "supply.pressure"
+    # |value / sigma| at and below the limit
+    v = identifiability(_result({flow: 4e-5, ps: 1.4e7}, {flow: 1e-7, ps: 1.4e7 / (IDENTIFIED_RATIO - 0.1)}))
+    assert v[flow] is None and v[ps] is not None and "sigma" in v[ps]
+    v = identifiability(_result({flow: 4e-5, ps: 1.4e7}, {flow: 1e-7, ps: 1.4e7 / (IDENTIFIED_RATIO + 0.1)}))
+    assert v[ps] is None
+    assert identifiability(_result({ps: 1.4e7}, {ps: math.inf}))[ps] is not None
+    # two well-determined parameters the record cannot tell apart: the flow gain (the baseline) stays
+    corr = [[1.0, 0.995], [0.995, 1.0]]
+    v = identifiability(_result({ps: 1.4e7, flow: 4e-5}, {ps: 1e5, flow: 1e-7}, corr))
+    assert v[flow] is None and "correlation" in v[ps]
+    corr = [[1.0, 0.5], [0.5, 1.0]]
+    assert identifiability(_result({ps: 1.4e7, flow: 4e-5}, {ps: 1e5, flow: 1e-7}, corr)) == {ps: None, flow: None}
+
+
+def test_calibration_measures_what_the_record_identifies_and_keeps_the_rest_nominal(off_nominal):
+    """Supply pressure and j2's friction are identified and recovered; j1 does not move, so its
+    friction is reported as not identified and kept at its nominal value."""
+    spec = load_robot("hydrolek")
+    rec = record_from_dataset(off_nominal, spec, source="rec")
+    m = model_spec(spec)
+    m.estimated = {"supply.pressure": (8e6, 20e6), "joints.j2.cylinder.viscous_friction": (100.0, 2e4),
+                   "joints.j1.cylinder.viscous_friction": (100.0, 2e4)}
+    pl = plan(m, rec)
+    est = oe.Problem(rec, rec.targets, n=int(rec.n * 0.6))
+    fast, _ = choose_numerics(m, rec, est.n)
+    cal = calibrate(m, fast, est, free=pl.free, why=pl.why)
+    rows = {c["parameter"]: c for c in cal.changes}
+    assert set(rows) == set(pl.keys)
+    for r in rows.values():
+        assert {"parameter", "nominal", "fitted", "sigma", "identified", "value"} <= set(r)
+    s = rows["supply.pressure"]
+    assert s["identified"] and s["nominal"] == NOMINAL_SUPPLY
+    assert s["value"] == pytest.approx(TRUE_SUPPLY, rel=0.02)
+    f = rows["joints.j2.cylinder.viscous_friction"]
+    assert f["identified"] and f["value"] == pytest.approx(TRUE_FRICTION, rel=0.3)
+    j1 = rows["joints.j1.cylinder.viscous_friction"]
+    assert not j1["identified"] and "sigma" in j1["not_identified_because"]
+    assert j1["value"] == j1["nominal"] == spec.get("joints.j1.cylinder.viscous_friction")
+    assert cal.spec.get("joints.j1.cylinder.viscous_friction") == j1["nominal"]
+    assert cal.spec.get("supply.pressure") == pytest.approx(s["value"])
+    assert set(cal.identified) == {"joints.j2.valve.rated_flow", "supply.pressure", "joints.j2.cylinder.viscous_friction"}
+
+
+def test_fit_reports_and_writes_only_identified_values(off_nominal, tmp_path):
+    from sim_core.identification.fitting import run_fit
+
+    spec = load_robot("hydrolek")
+    spec.estimated = {"supply.pressure": (8e6, 20e6), "joints.j1.cylinder.viscous_friction": (100.0, 2e4)}
+    rec = record_from_dataset(off_nominal, spec, source="rec")
+    res = run_fit(spec, rec, None, out=str(tmp_path / "p.toml"), max_sims=60)
+    p = res["parameters"]
+    assert p["supply.pressure"]["identified"] and p["supply.pressure"]["value"] == pytest.approx(TRUE_SUPPLY, rel=0.03)
+    j1 = p["joints.j1.cylinder.viscous_friction"]
+    assert not j1["identified"] and j1["value"] == j1["initial"] and "not_identified_because" in j1
+    assert [c["parameter"] for c in res["calibration"]["changes"]] == list(p)
+    written = tomllib.loads((tmp_path / "p.toml").read_text())["parameters"]
+    assert written["supply.pressure"] == pytest.approx(p["supply.pressure"]["value"])
+    assert "joints.j1.cylinder.viscous_friction" not in written
+
+
+# ---- the start pose -----------------------------------------------------------------------------
+
+def test_start_pose_is_the_records_first_reading():
+    """Taken from the record with an honest error: near the truth within 3 standard errors; averaged
+    over many samples when the arm rests at the start, from a short curved fit when it moves at once."""
+    truth = load_robot("hydrolek")
+    truth.set("joints.j2.initial_position", -0.25)
+    truth.set("joints.j2.sensor.noise", 2e-3)      # V: ~1.2 mrad
+    sigma = 2e-3 * abs(truth.get("joints.j2.sensor.A"))
+    spec = load_robot("hydrolek")
+    for rest, most in ((0.0, sigma), (1.0, sigma / 3)):
+        ds = simulated(truth, duration=3.0, rest=rest)
+        q0, se = first_reading(ds.time, ds["q_j2"])
+        assert se < most
+        assert q0 == pytest.approx(-0.25, abs=3 * se + 2e-4)
+        for policy in ("auto", "data"):
+            rec = record_from_dataset(ds, spec, source="r", initial_pose=policy)
+            assert rec.initial_pose["j2"] == q0 and rec.pose_kind == "reading"
+            assert start_position(spec, rec, "j2") == q0
+    rec = record_from_dataset(ds, spec, source="r", initial_pose="spec")
+    assert rec.initial_pose["j2"] == -0.3 and rec.pose_kind == "true"
+    assert start_position(spec, rec, "j2") == -0.3
+
+
+def test_start_position_inverts_the_models_sensor():
+    """A model whose sensor reads y = g q + c starts where it reads the record's first reading."""
+    spec = load_robot("hydrolek")
+    ds = simulated(spec, duration=3.0)
+    rec = record_from_dataset(ds, spec, source="r")
+    y0 = rec.initial_pose["j2"]
+    assert start_position(spec, rec, "j2") == y0
+    spec.enable_effect("sensor_offset", "j2", offset=0.02)
+    spec.enable_effect("sensor_gain", "j2", gain=1.05)
+    assert start_position(spec, rec, "j2") == pytest.approx((y0 - 0.02) / 1.05)
+    out = Runner(rec).simulate(model_spec(spec), 5)
+    assert out.angles["j2"][0] == pytest.approx(y0, abs=1e-9)
+
+
+@pytest.fixture(scope="module")
+def shifted(tmp_path_factory):
+    """A clean hydrolek record whose arm started 0.05 rad from the spec's initial position."""
+    from conftest import run_cli
+
+    d = tmp_path_factory.mktemp("shifted")
+    run_cli("excite", "--robot", "hydrolek", "--joint", "j2", "--duration", 30, "--seed", 21, "--out", d / "in.csv",
+            check=True)
+    run_cli("simulate", "--robot", "hydrolek", "--input", d / "in.csv", "--out", d / "meas.csv",
+            "--set", "joints.j2.initial_position=-0.25", "--noise-angle", 4e-4, "--seed", 4, check=True)
+    return d
+
+
+def test_an_arm_started_elsewhere_is_not_a_sensor_offset(cli, shifted, tmp_path):
+    proc = cli("diagnose", "--robot", "hydrolek", shifted / "meas.csv", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+    assert all(s["effect"] != "sensor_offset" for s in d["selected"])
+    assert d["data"]["initial_pose_source"]["j2"] == "data"
+    rows = d["calibration"]["changes"]
+    assert [r["parameter"] for r in rows] == ["joints.j2.valve.rated_flow"] and rows[0]["identified"]
+    assert d["calibration"]["values"]["joints.j2.valve.rated_flow"] == pytest.approx(rows[0]["value"])
+    assert "coulomb_friction" in d["calibration"]["held"]["joints.j2.cylinder.viscous_friction"]
+    assert d["closed_loop"] is False
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "Baseline calibration" in html and "joints.j2.valve.rated_flow" in html
+    # started from the spec's pose on request, the same record carries a 0.05 rad "offset"
+    proc = cli("diagnose", "--robot", "hydrolek", shifted / "meas.csv", "--report", tmp_path / "spec",
+               "--initial-pose", "spec", "--effects", "sensor_offset", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "spec" / "diagnosis.json").read_text())
+    assert [s["effect"] for s in d["selected"]] == ["sensor_offset"]
+    assert d["selected"][0]["params"]["offset"] == pytest.approx(0.05, rel=0.1)
