@@ -230,6 +230,8 @@ def test_robot_is_named_by_name_directory_or_toml_path(cli, rigs):
     assert j["parameters"]["cylinder"]["bore"] == {"value": 0.05, "unit": "m"}
     assert j["limits"] == [0.0, 0.5] and [e["name"] for e in j["effects"]] == ["payload"]
     assert "joints.lift.valve.rated_flow" in one["estimated"] and not one["builtin"]
+    assert one["estimated_units"]["joints.lift.sensor.A"] == "m/V"
+    assert one["estimated_units"]["effects.payload.lift.mass"] == "kg"
     boom = json.loads(cli("robots", "--robot", rigs["boom"], "--json", check=True).stdout)
     assert boom["joints"][0]["type"] == "revolute" and boom["joints"][0]["sensor"]["A_unit"] == "rad/V"
     # the plain listing is unchanged: the built-in robots only

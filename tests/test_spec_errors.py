@@ -142,6 +142,11 @@ def test_estimated_table_two_shapes_and_errors(cli, tmp_path):
             "effects.payload.lift.mass": (0.0, 50.0)}
     assert a.estimated == want and b.estimated == want
     assert load_robot(LIFT).estimated == {}
+    # 'true': estimated without a range: a decade either way of a positive value, +-max(|v|, 1) otherwise
+    c = load_robot(_rig(tmp_path, lambda t: t + '\n[estimated]\n"joints.lift.valve.rated_flow" = true\n'
+                                             '"joints.lift.sensor.B" = true\n', name="c"))
+    assert c.estimated["joints.lift.valve.rated_flow"] == pytest.approx((2e-5, 2e-3))
+    assert c.estimated["joints.lift.sensor.B"] == (-1.0, 1.0)
     cases = [
         ('"joints.lift.valve.rated_flow" = [1e-3, 2e-3]', "the value 0.0002 m^3/s lies outside its estimated range"),
         ('"joints.lift.valve.rated_flo" = [1e-4, 4e-4]', "unknown parameter 'rated_flo'; known: rated_flow"),

@@ -9,6 +9,9 @@ from ..params_file import ParamsFileError, apply_params_file
 from . import CliError
 
 
+ROBOT_HELP = "built-in robot name, a directory holding robot.toml (e.g. from 'hydrohil rig new'), or a robot.toml path"
+
+
 def parse_value(text: str):
     """Number, JSON list/bool, or plain text."""
     t = text.strip()

@@ -3,7 +3,7 @@
 
 def register(sub):
     from ..ingest import add_reading_options
-    from .common import add_model_options
+    from .common import ROBOT_HELP, add_model_options
 
     p = sub.add_parser(
         "diagnose-fleet",
@@ -17,7 +17,7 @@ def register(sub):
     )
     p.add_argument("records", nargs="+", metavar="RECORD", help="measured records (datasets, or log files read with the "
                    "reading options below)")
-    p.add_argument("--robot", required=True, help="built-in robot name or a robot.toml path")
+    p.add_argument("--robot", required=True, help=ROBOT_HELP)
     p.add_argument("--report", required=True, metavar="DIR", help="output directory (kept between runs)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local processes (default) or Ray tasks (pip install 'hydrohil[ray]')")

@@ -2,8 +2,10 @@
 
 
 def register(sub):
+    from .common import ROBOT_HELP
+
     p = sub.add_parser("excite", help="write a multi-level PRBS input CSV for one joint (others at 0 V)")
-    p.add_argument("--robot", required=True)
+    p.add_argument("--robot", required=True, help=ROBOT_HELP)
     p.add_argument("--joint", required=True)
     p.add_argument("--levels", type=int, default=5, help="number of voltage levels (default 5)")
     p.add_argument("--amplitude", type=float, default=5.0, help="largest |voltage| (V, default 5)")

@@ -2,14 +2,14 @@
 
 
 def register(sub):
-    from .common import add_model_options
+    from .common import ROBOT_HELP, add_model_options
 
     p = sub.add_parser("fmu", help="export the plant as an FMI 2.0 co-simulation FMU (needs the 'fmu' extra)",
                        description="Write the plant of a robot, with any --params/--set/--effect changes, as an "
                                    "FMI 2.0 co-simulation FMU: inputs u_<joint> (V); outputs q_<joint> (measured), "
                                    "qd_<joint> (true velocity), p_<joint>_a/_b (Pa); every numeric parameter. The "
                                    "FMU runs the plant in Python: the importing side needs hydrohil installed.")
-    p.add_argument("--robot", required=True, help="built-in robot name or path to a robot.toml")
+    p.add_argument("--robot", required=True, help=ROBOT_HELP)
     p.add_argument("--out", required=True, metavar="PLANT.fmu", help="the FMU file to write")
     add_model_options(p)
     p.set_defaults(func=run)

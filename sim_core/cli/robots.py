@@ -62,5 +62,5 @@ def _one(args) -> int:
     if d["estimated"]:
         print("  estimated (calibration may move them within):")
         for k, (lo, hi) in d["estimated"].items():
-            print(f"    {k}: {lo:g} .. {hi:g}")
+            print(f"    {k}: {lo:g} .. {hi:g} {d['estimated_units'].get(k, '')}".rstrip())
     return 0

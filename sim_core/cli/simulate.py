@@ -3,10 +3,10 @@
 
 def register(sub):
     from ..ingest import add_reading_options
-    from .common import add_model_options
+    from .common import ROBOT_HELP, add_model_options
 
     p = sub.add_parser("simulate", help="simulate an input file (time, u_<joint>) and write a dataset CSV/Parquet")
-    p.add_argument("--robot", required=True)
+    p.add_argument("--robot", required=True, help=ROBOT_HELP)
     p.add_argument("--input", required=True, metavar="IN.csv",
                    help="commands: a dataset (.csv or .parquet) with time and u_<joint>, or any log file read with the "
                         "reading options below")

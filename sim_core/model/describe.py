@@ -8,7 +8,7 @@ import math
 from typing import Any
 
 from ..effects import EFFECTS
-from .spec import ROBOTS_DIR, RobotSpec
+from .spec import ROBOTS_DIR, RobotSpec, estimable
 
 # units declared for a revolute joint that read differently on a prismatic one (referred to the joint)
 _PRISMATIC = {"rad": "m", "rad/V": "m/V", "rad/s": "m/s", "N m": "N", "N m s/rad": "N s/m"}
@@ -93,4 +93,16 @@ def describe_robot(spec: RobotSpec) -> dict:
         "fluid": _params(spec.fluid, False, False),
         "integrator": _params(spec.integrator, False, False),
         "estimated": {k: list(v) for k, v in spec.estimated.items()},
+        "estimated_units": {k: _estimated_unit(spec, k) for k in spec.estimated},
     }
+
+
+def _estimated_unit(spec: RobotSpec, key: str) -> str:
+    param, _ = estimable(spec, key)
+    parts = key.split(".")
+    joint = parts[1] if parts[0] == "joints" else parts[2] if parts[0] == "effects" and len(parts) == 4 else None
+    if joint is None or joint not in spec.joint_names:
+        return param.unit
+    prismatic = bool(spec.tree.is_prismatic(spec.tree.index(spec.joint(joint).dof)))
+    referred = parts[0] == "effects" or parts[2] == "sensor" or len(parts) == 3
+    return joint_unit(param.unit, prismatic, referred)

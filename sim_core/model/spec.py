@@ -382,7 +382,8 @@ def _compose_arms(data: dict, where: Path) -> dict:
     for i, arm in enumerate(data["arms"]):
         if "spec" not in arm or "prefix" not in arm:
             raise SpecError(f"{where}: arms[{i}] needs spec and prefix")
-        sub = _read_toml(_robot_file(arm["spec"]))
+        rel = where.parent / str(arm["spec"])          # a path relative to this file, else a name
+        sub = _read_toml(resolve_robot(rel if rel.exists() else arm["spec"]))
         if "arms" in sub:
             sub = _compose_arms(sub, Path(arm["spec"]))
         prefix = arm["prefix"]
@@ -649,9 +650,19 @@ def _estimated(spec: RobotSpec, table: Any, at: _Where) -> dict[str, tuple[float
         def fail(msg, key=key):
             line = at.lines.find(("estimated", key), ("estimated", *key.split(".")), "estimated")
             return SpecError(msg, file=at.path, line=line, key=f'estimated."{key}"' if "." in key else f"estimated.{key}")
+        if rng is True:                   # estimated, no range given: a decade either way (or +-max(|v|, 1))
+            try:
+                param, value = estimable(spec, key)
+            except SpecError as exc:
+                raise fail(exc.message) from None
+            if value > 0 and param.lower >= 0:
+                rng = [max(param.lower, value / 10.0), min(param.upper, value * 10.0)]
+            else:
+                w = max(abs(value), 1.0)
+                rng = [max(param.lower, value - w), min(param.upper, value + w)]
         if (not isinstance(rng, list) or len(rng) != 2
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in rng)):
-            raise fail(f"expected [lower, upper] (two finite numbers), got {rng!r}")
+            raise fail(f"expected [lower, upper] (two finite numbers) or true, got {rng!r}")
         lo, hi = float(rng[0]), float(rng[1])
         if not lo < hi:
             raise fail(f"lower {lo:g} must be below upper {hi:g}")
