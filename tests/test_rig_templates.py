@@ -36,7 +36,8 @@ def rigs(tmp_path_factory):
         args = ["rig", "new", template, "--out", root / case]
         for s in sets:
             args += ["--set", s]
-        run_cli(*args, check=True)
+        r = run_cli(*args, check=True)
+        assert "warning" not in r.stderr, r.stderr          # the templates' actuators carry their loads
         out[case] = root / case
     return out
 
@@ -211,6 +212,19 @@ def test_set_and_out_errors(cli, tmp_path):
     assert r.returncode == 2 and "--force" in r.stderr and (d / "robot.toml").read_text() == before
     assert cli("rig", "new", "rotary", "--out", d, "--set", "load_kg=9", "--force").returncode == 0
     assert load_robot(d).effects[0].params["mass"] == 9.0
+
+
+def test_an_actuator_too_small_for_its_load_is_warned(cli, tmp_path):
+    """A 10 kg, 0.6 m arm with 60 kg at its end needs (10 * 0.3 + 60 * 0.6) g = 382.6 N m; the vane
+    actuator gives 2e-5 m^3/rad * (14 - 0.2) MPa = 276 N m: written, but warned."""
+    r = cli("rig", "new", "rotary", "--out", tmp_path / "r", "--set", "load_kg=60")
+    assert r.returncode == 0 and (tmp_path / "r" / "robot.toml").is_file()
+    assert "warning: joints.swing: the load needs 382.6 N m" in r.stderr and "at most 276 N m" in r.stderr
+    assert "could not lift" in r.stderr
+    r = cli("rig", "new", "rotary", "--out", tmp_path / "r2", "--set", "load_kg=40")       # 264.9 N m: 96 %
+    assert r.returncode == 0 and "264.9 N m at q = 0, 96 % of the 276 N m" in r.stderr and "crawl" in r.stderr
+    r = cli("rig", "new", "rotary", "--out", tmp_path / "r3", "--set", "load_kg=30")       # 206 N m: fits
+    assert r.returncode == 0 and "warning" not in r.stderr
 
 
 def test_robot_is_named_by_name_directory_or_toml_path(cli, rigs):

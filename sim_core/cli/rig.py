@@ -23,6 +23,8 @@ def register(sub):
 
 
 def run_new(args) -> int:
+    import sys
+
     from ..rigs import RigError, new_rig, template_knobs
     from . import CliError
 
@@ -33,10 +35,12 @@ def run_new(args) -> int:
     if not args.out:
         raise CliError("--out DIR is required")
     try:
-        toml_path, urdf_path = new_rig(args.template, args.out, args.name, args.set, force=args.force)
+        toml_path, urdf_path, warnings = new_rig(args.template, args.out, args.name, args.set, force=args.force)
     except RigError as exc:
         raise CliError(str(exc)) from None
     print(f"wrote {toml_path} and {urdf_path}")
+    for w in warnings:
+        print(f"hydrohil rig: warning: {w}", file=sys.stderr)
     print(f"edit the numbers (each says its unit, typical range and how to measure it), then check: "
           f"hydrohil robots --robot {args.out}")
     return 0

@@ -56,6 +56,7 @@ class Rig:
     urdf_name: str
     urdf: str
     knobs: dict[str, Any]
+    warnings: list[str]
 
 
 def template_knobs(template: str) -> list[Knob]:
@@ -270,16 +271,61 @@ def render(template: str, out: str | Path, name: str | None = None, sets: list[s
         with tempfile.TemporaryDirectory() as tmp:
             (Path(tmp) / "robot.toml").write_text(toml_text)
             (Path(tmp) / f"{name}.urdf").write_text(urdf_text)
-            load_robot(tmp)
+            spec = load_robot(tmp)
     except SpecError as exc:
         raise RigError(f"the rig would not load: {exc.key + ': ' if exc.key else ''}{exc.message}") from None
     tomllib.loads(toml_text)
-    return Rig(name, template, toml_text, f"{name}.urdf", urdf_text, {kk: vv for kk, vv in k.items() if not kk.startswith("_")})
+    return Rig(name, template, toml_text, f"{name}.urdf", urdf_text,
+               {kk: vv for kk, vv in k.items() if not kk.startswith("_")}, capacity_warnings(spec))
+
+
+def capacity_warnings(spec) -> list[str]:
+    """Where the actuator cannot hold the gravity load at full supply pressure somewhere in the joint's
+    range (the rig would sag at zero command and cannot lift): one line per joint, naming the numbers."""
+    import numpy as np
+
+    from ..plant import Plant
+
+    out = []
+    ctx = Plant(spec).create_context(seed=0)
+    rb = ctx.rigid_body()                     # masses with the payload on
+    z = np.zeros(spec.tree.n)
+    for j in spec.joints:
+        i = spec.tree.index(j.dof)
+        lo, hi = float(spec.tree.lower[i]), float(spec.tree.upper[i])
+        qs = np.linspace(lo, hi, 21)
+        q = np.array(ctx.q, dtype=float)
+        tau = []
+        for v in qs:
+            q[i] = v
+            tau.append(abs(float(rb.inverse_dynamics(q, z, z)[i])))
+        tau = np.array(tau)
+        supply = spec.get("supply.pressure") - spec.get("supply.tank_pressure")
+        if j.kind == "cylinder":
+            cyl = j.components["cylinder"]
+            arm = np.abs(cyl.arms(spec.tree, i, qs))
+            cap = cyl.area_a * supply * arm
+            unit = "N" if spec.tree.is_prismatic(i) else "N m"
+        else:
+            rot = j.components["rotary"]
+            cap = np.full_like(qs, rot["displacement"] * rot["gear_ratio"] * supply)
+            unit = "N m"
+        worst = int(np.argmax(tau / cap))
+        need = f"joints.{j.name}: the load needs {tau[worst]:.4g} {unit} at q = {qs[worst]:.3g}"
+        fix = "(a larger bore/displacement, a higher supply pressure or a lighter load)"
+        if tau[worst] > cap[worst]:
+            out.append(f"{need} but the actuator gives at most {cap[worst]:.4g} {unit} at the full supply pressure: "
+                       f"it would sag and could not lift it {fix}")
+        elif tau[worst] > 0.9 * cap[worst]:
+            out.append(f"{need}, {100 * tau[worst] / cap[worst]:.0f} % of the {cap[worst]:.4g} {unit} the actuator gives "
+                       f"at the full supply pressure: lifting would crawl {fix}")
+    return out
 
 
 def new_rig(template: str, out: str | Path, name: str | None = None, sets: list[str] | tuple = (),
-            force: bool = False) -> tuple[Path, Path]:
-    """Write ``out/robot.toml`` and ``out/<name>.urdf``; refuses to overwrite unless ``force``."""
+            force: bool = False) -> tuple[Path, Path, list[str]]:
+    """Write ``out/robot.toml`` and ``out/<name>.urdf``; refuses to overwrite unless ``force``.
+    Returns both paths and the capacity warnings."""
     out = Path(out)
     rig = render(template, out, name, sets)
     toml_path, urdf_path = out / "robot.toml", out / rig.urdf_name
@@ -291,7 +337,7 @@ def new_rig(template: str, out: str | Path, name: str | None = None, sets: list[
     out.mkdir(parents=True, exist_ok=True)
     toml_path.write_text(rig.toml)
     urdf_path.write_text(rig.urdf)
-    return toml_path, urdf_path
+    return toml_path, urdf_path, rig.warnings
 
 
 __all__ = ["RigError", "Rig", "TEMPLATES", "new_rig", "render", "template_knobs"]
