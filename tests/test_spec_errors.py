@@ -163,3 +163,12 @@ def test_estimated_table_two_shapes_and_errors(cli, tmp_path):
         assert rest.startswith(f"estimated.{key}: ") and expect in rest, rest
     with pytest.raises(SpecError, match="estimated"):
         load_robot(_rig(tmp_path, lambda t: t + "\n[estimated]\nx = 3\n", name="x"))
+
+
+def test_urdf_problems_name_the_urdf(cli, tmp_path):
+    d = _rig(tmp_path, lambda t: t.replace('urdf = "lift.urdf"', 'urdf = "lfit.urdf"'))
+    f, line, rest = _error(cli, d)
+    assert line == _line_of(d / "robot.toml", 'urdf = "lfit.urdf"') and rest.startswith("robot.urdf: no such file")
+    d = _rig(tmp_path, urdf_edit=lambda t: t.replace("</robot>", "<link"), name="m")
+    f, line, rest = _error(cli, d)
+    assert f.endswith("m/lift.urdf") and rest.startswith("malformed URDF")
