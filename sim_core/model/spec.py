@@ -9,7 +9,21 @@ reported by its path and never reaches the kernel. Parameter paths::
     passive.<joint>.initial_position
 
 Robot configurations are chosen by name, like python-can interfaces: the built-in ones live in
-``sim_core/robots/<name>/robot.toml``; a path to another ``robot.toml`` works too.
+``sim_core/robots/<name>/robot.toml``; a directory holding a ``robot.toml`` (``hydrohil rig new``
+writes one) or the path of a ``robot.toml`` works too (:func:`resolve_robot`, the one resolver every
+``--robot`` goes through).
+
+Parameters the user does not know exactly are listed in an optional ``[estimated]`` table, each path
+with the range calibration may search, in the parameter's unit (or ``true``: a decade either way)::
+
+    [estimated]
+    "supply.pressure" = [9.8e6, 16.1e6]
+    "joints.lift.valve.rated_flow" = [5e-5, 8e-4]
+    "effects.payload.lift.mass" = [50.0, 205.0]
+
+(nested tables, ``[estimated.joints.lift.valve] rated_flow = [...]``, read the same) and exposed as
+``RobotSpec.estimated``. Errors are :class:`SpecError`s that name the file, the line, the key and
+what was expected.
 """
 
 from __future__ import annotations
@@ -335,7 +349,7 @@ def resolve_robot(name_or_path: str | Path) -> Path:
             hint = f" (it has {', '.join(tomls)}: give the file's path)" if tomls else \
                 " ('hydrohil rig new TEMPLATE --out DIR' writes one)"
             raise SpecError(f"directory {text!r} holds no robot.toml{hint}")
-    elif p.is_file():
+    elif p.is_file() and not (p.suffix == "" and (ROBOTS_DIR / text / "robot.toml").is_file()):
         if p.suffix.lower() == ".toml":
             return p.resolve()
         if p.suffix.lower() == ".urdf":
