@@ -103,7 +103,7 @@ def rotary(k: dict) -> dict:
         "lower": "-3.1" if motor else "-1.5", "upper": "3.1" if motor else "1.5", "initial_position": "0.0",
         "rotary_type": k["actuator"], "displacement": num(d),
         "chamber_volume": num(max(1e-5, 1.5 * d)),
-        "viscous": "5.0",
+        "viscous": "20.0",
         "effort": num(round(d * k["supply_pressure"])),
         "sensor_A": "0.5236" if not motor else "0.6283", "sensor_B": "-2.618" if not motor else "-3.1416",
     }
