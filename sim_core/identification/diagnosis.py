@@ -10,7 +10,10 @@ The procedure (research note 'discrepancy catalog' §4):
 3. screening: signature statistics give initial guesses and the report's evidence (signatures.py);
 4. decision: fit every candidate, accept by validation gain, BIC and identifiability, greedily for
    several effects (selection.py); refit the result with the default integrator settings;
-5. the null outcome ("no_significant_discrepancy") is an answer like any other.
+5. the verdict (decision.py): "discrepancy" with the named effects; "no_significant_discrepancy", the
+   null outcome, an answer like any other; "unexplained_discrepancy" when the final model still misses
+   the record by far (an angle fit below zero, or far below the noise ceiling with failing residual
+   tests), with the residual evidence (residual_evidence.py) instead of the least-bad effect.
 """
 
 from __future__ import annotations
@@ -24,12 +27,15 @@ import numpy as np
 from . import output_error as oe
 from .calibration import calibrate, plan
 from .closed_loop import detect as detect_closed_loop
-from .candidates import bank, decider
+from .candidates import bank
+from .decision import FAR_POINTS, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter
 from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
+from .residual_evidence import evidence as residual_evidence
+from .residual_evidence import residual_fails
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
-from .selection import (AMBIGUITY, GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
+from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         free_list, model_with, select, without)
 from .signatures import joint_signatures, public
 from .simulation import Outputs, Runner, choose_numerics, model_spec
@@ -60,10 +66,11 @@ class Diagnosis:
     notes: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     closed_loop: dict = field(default_factory=dict)   # closed_loop.detect's answer
+    unexplained: dict = field(default_factory=dict)   # why and where the record is left unexplained
 
     @property
     def verdict(self) -> str:
-        return "discrepancy" if self.selected else "no_significant_discrepancy"
+        return verdict(bool(self.selected), bool(self.unexplained))
 
     def to_json(self) -> dict:
         return {
@@ -74,6 +81,10 @@ class Diagnosis:
                          "channels": self.baseline_fits},
             "extended": {"fit": {j: f["angle"] for j, f in self.extended_fits.items()},
                          "score": {j: f["score"] for j, f in self.extended_fits.items() if "score" in f},
+                         "residual_explained_pct": {
+                             j: _pct(residual_explained_pct(f["score"] - self.baseline_fits[j]["score"],
+                                                            self.baseline_fits[j]["score"]))
+                             for j, f in self.extended_fits.items() if "score" in f and "score" in self.baseline_fits[j]},
                          "channels": self.extended_fits},
             "selected": self.selected,
             "candidates": self.candidates,
@@ -82,6 +93,9 @@ class Diagnosis:
                         "when recorded, chamber pressures",
                 "threshold_points": THRESHOLD_POINTS, "noise_factor": NOISE_FACTOR,
                 "score_ceiling": self.ceiling, "stopped": self.stopped,
+                "residual_explained_pct": "share of the baseline's normalised residual a gain removes: "
+                                          "100 gain / (100 - baseline score)",
+                "far_points": FAR_POINTS,
             },
             "validation": {"source": self.validation.source, "first_sample": self.split,
                            "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split)},
@@ -93,6 +107,7 @@ class Diagnosis:
             "numerics": self.numerics,
             "signatures": {j: public(s) for j, s in self.signatures.items()},
             "residual_tests": {k: {j: public(v) for j, v in t.items()} for k, t in self.tests.items()},
+            "unexplained": self.unexplained,
             "timings_s": self.timings,
         }
 
@@ -212,28 +227,18 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the fast optimum: the fast substep was checked to move the fits by < 0.25 points and biases the
     # parameters by about 1 %); the baseline keeps its calibration and is re-simulated at the default
     base_acc = base_fast
-    chosen = list(sel.accepted)
-    model = sel.model
-    ext_acc = base_acc
-    final: oe.FitResult | None = None
-    while chosen:
-        accepted = [(e.candidate, e.effect_params()) for e in chosen]
-        free = free_list(model, None, accepted, keys)
-        final = oe.fit(accurate, est, model, free, max_sims=2 * (len(free) + 1) + 1, tol=1e-3)
-        ext_acc = final.spec
-        # every named effect must still be worth the threshold in the final model: removing it
-        # (nothing refitted, so the cost is if anything overstated) must lose THRESHOLD_POINTS on the
-        # validation data. A greedy pick whose gain came from refitting the others is dropped here.
-        worth = _contributions(base_fast, ext_acc, chosen, vaccurate, vprob)
-        weakest = int(np.argmin(worth))
-        if worth[weakest] >= THRESHOLD_POINTS:
-            break
-        ev = chosen.pop(weakest)
-        ev.reasons.append(f"dropped in the final check: removing it from the refitted model costs only "
-                          f"{worth[weakest]:.2f} points")
-        log(f"final check: dropped {ev.candidate.label} ({worth[weakest]:.2f} points)")
-        model = without(base_fast, ext_acc, ev.candidate)
-        final, ext_acc = None, base_acc
+
+    def refit(model, chosen):
+        free = free_list(model, None, [(e.candidate, e.effect_params()) for e in chosen], keys)
+        return oe.fit(accurate, est, model, free, max_sims=2 * (len(free) + 1) + 1, tol=1e-3)
+
+    # every named effect must still be worth the threshold in the final model: removing it (nothing
+    # refitted, so the cost is if anything overstated) must lose THRESHOLD_POINTS on the validation
+    # data. A greedy pick whose gain came from refitting the others is dropped here.
+    chosen, final = final_check(sel.accepted, sel.model, refit=refit,
+                                worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob),
+                                remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate), log=log)
+    ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]
     base_out = vaccurate.simulate(base_acc, vprob.n)
@@ -253,21 +258,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             params[name] = _absent(fp, v, ev)
             lo_hi = (final.ci95 if final is not None else ev.ci95).get(fp.key, [v, v])
             ci[name] = [float(lo_hi[0]), float(lo_hi[1])]
-        others = [e for e in sel.rounds[ev.round - 1] if e is not ev]
-        runner_up = max(others, key=lambda e: e.gain) if others else None
         item = {"effect": c.effect, "joint": c.joint, "params": params, "ci95": ci, "gain": round(ev.gain, 3),
+                "residual_explained_pct": _pct(ev.explained_pct),
                 "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
                 "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
                 "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
                 "refit_of_nominal": c.existing, "round": ev.round}
-        if runner_up is not None:
-            item["runner_up"] = {"effect": runner_up.candidate.effect, "joint": runner_up.candidate.joint,
-                                 "gain": round(runner_up.gain, 3)}
-            if runner_up.gain >= AMBIGUITY * ev.gain and (runner_up.candidate.effect, runner_up.candidate.joint) != (c.effect, c.joint):
-                item["ambiguous"] = True
-                item["decided_by"] = decider(c.effect, runner_up.candidate.effect, rec.has_pressures)
-            else:
-                item["ambiguous"] = False
+        item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures))
         selected.append(item)
 
     candidates = []
@@ -275,6 +272,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         for ev in sorted(evals, key=lambda e: -e.gain):
             candidates.append({
                 "effect": ev.candidate.effect, "joint": ev.candidate.joint, "gain": round(ev.gain, 3),
+                "residual_explained_pct": _pct(ev.explained_pct),
                 "bic_delta": _num(ev.bic_delta), "params": {k: _num(v) for k, v in ev.effect_params().items()},
                 "round": r, "accepted": ev in sel.accepted, "rejected_because": ev.reasons,
                 "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
@@ -288,10 +286,47 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched]}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
+    unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected)
+    if unexplained and selected:
+        # a named cause must explain the record: the effects tried stay in the report as the closest
+        # candidates, the model is not extended
+        for ev in sel.accepted:
+            ev.reasons.append("not named: the extended model still leaves the record unexplained")
+        for item in candidates:
+            item["accepted"] = False
+        selected, sel.accepted = [], []
+        ext_acc, ext_out, ext_fits = base_acc, base_out, base_fits
+        tests["extended"] = tests["baseline"]
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
-                     {k: round(v, 2) for k, v in timings.items()}, loop)
+                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained)
+
+
+def _score(fits: dict, joints: list[str]) -> float:
+    return float(np.mean([fits[j]["score"] for j in joints]))
+
+
+def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, ext_fits: dict, ext_out: Outputs,
+                 ext_tests: dict, ceiling: float, selected: list[dict]) -> dict:
+    """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
+    model explains the record."""
+    joints = vprob.joints
+    score = _score(ext_fits, joints)
+    why = unexplained_reasons(score=score, ceiling=ceiling, angle_fits={j: ext_fits[j]["angle"] for j in joints},
+                              residual_fails=any(residual_fails(ext_tests.get(j, {})) for j in joints),
+                              base_score=_score(base_fits, joints))
+    if not why:
+        return {}
+    return {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
+            "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
+            "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
+                        for s in selected],
+            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits)}
+
+
+def _pct(v: float):
+    return None if v is None or not math.isfinite(v) else round(float(v), 1)
 
 
 def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, prob: oe.Problem) -> list[float]:

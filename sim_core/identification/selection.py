@@ -16,8 +16,8 @@ The best accepted candidate joins the model (greedy forward selection); the next
 remaining candidate jointly with everything accepted (a large effect masks the others, so first-round
 gains are no guide), and stops when nothing passes or when the score is within the threshold of its
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
-threshold. The runner-up is kept; when its gain is within 20 % of the
-winner's the choice is flagged ambiguous with the measurement that would decide.
+threshold. The rules themselves are pure functions in decision.py; this module supplies the
+simulator-based steps they call (fit and score a candidate, score a model, refit without an effect).
 """
 
 from __future__ import annotations
@@ -27,22 +27,22 @@ import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import output_error as oe
 from .candidates import Candidate
+from .decision import (AMBIGUITY, MAX_EFFECTS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation, backward as
+                       _backward, forward, judge)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .record import Record
 from .simulation import Outputs, Runner
 
-THRESHOLD_POINTS = 2.0      # smallest validation gain that counts (research note: 2 points)
-NOISE_FACTOR = 3.0          # ... or 3 x the noise spread of the gain, when larger
-SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
-AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
-MAX_EFFECTS = 3
+__all__ = ["AMBIGUITY", "MAX_EFFECTS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
+           "Setting", "evaluate", "select", "without", "model_with", "free_list", "affected_joints"]
+
 NOISE_DRAWS = 16
 UNCERTAINTY_SHARE = 0.5     # candidates below this share of the threshold skip the uncertainty step
 GRID_SHARE = 0.5            # starting points are ranked on the first half of the estimation data
@@ -62,34 +62,6 @@ class Setting:
     pressure_noise: dict[str, float]    # pressure noise per joint (Pa)
     max_sims: int = 45
     grid: oe.Problem | None = None      # where starting points are ranked (a shorter window)
-
-
-@dataclass
-class Evaluation:
-    candidate: Candidate
-    values: dict[str, float]                  # every fitted key (effect and calibration)
-    sigma: dict[str, float]
-    ci95: dict[str, list[float]]
-    cost: float
-    fits: dict[str, dict[str, float]]         # validation fits per joint
-    gain: float = 0.0
-    gain_channels: dict[str, float] = field(default_factory=dict)
-    spread: float = 0.0
-    bic_delta: float = 0.0
-    significance: dict[str, float] = field(default_factory=dict)
-    bounds: dict[str, str] = field(default_factory=dict)
-    reasons: list[str] = field(default_factory=list)
-    sims: int = 0
-    round: int = 1
-    outputs: Outputs | None = None
-
-    @property
-    def accepted_ok(self) -> bool:
-        return not self.reasons
-
-    def effect_params(self) -> dict[str, float]:
-        """The candidate's own parameters (effect keys), by parameter name."""
-        return {fp.key.split(".")[-1]: self.values[fp.key] for fp in self.candidate.free}
 
 
 def model_with(base_spec, accepted: list[tuple[Candidate, dict]], cand: Candidate | None, values: dict[str, float]):
@@ -145,6 +117,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
         oe.add_uncertainty(res, st.est_runner, st.est)
     ev = Evaluation(cand, res.values, res.sigma, res.ci95, res.cost, fits, sims=res.sims, round=round_, outputs=out)
     ev.gain = gain
+    ev.base_score = float(np.mean([base_fits[j]["score"] for j in joints]))
     for ch in ("angle", "velocity", "pressure"):
         vals = [fits[j][ch] - base_fits[j][ch] for j in joints if ch in fits[j]]
         if vals:
@@ -161,39 +134,14 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
 
 
 def _judge(ev: Evaluation, res: oe.FitResult) -> None:
-    """Apply the acceptance rules; the reasons a candidate fails are kept for the report."""
-    significant = 0
-    for fp in ev.candidate.free:
-        key = fp.key
-        v = ev.values[key]
-        sig = ev.sigma.get(key, math.inf)
-        null = fp.null
-        bound = res.at_bound(key) if res.ok else None
-        null_side = None
-        if null is not None and not math.isnan(null):
-            null_side = "lower" if null <= fp.lower + 1e-12 * max(1.0, abs(fp.lower)) else (
-                "upper" if null >= fp.upper - 1e-12 * max(1.0, abs(fp.upper)) else None)
-        ref = 0.0 if null is None or not math.isfinite(null) else null
-        t = abs(v - ref) / sig if sig > 0 and math.isfinite(sig) else 0.0
-        ev.significance[key] = t
-        if bound is not None:
-            ev.bounds[key] = bound
-            if bound == null_side:
-                continue                      # at the value where the effect vanishes: absent
-            ev.reasons.append(f"{key.split('.')[-1]} at its {bound} search bound")
-            continue
-        if t > SIGNIFICANCE:
-            significant += 1
-    if not significant and not any("search bound" in r for r in ev.reasons):
-        ev.reasons.append(f"no parameter differs from 'no effect' by {SIGNIFICANCE:g} sigma")
-    if not math.isfinite(ev.gain):
-        ev.reasons.append("the fitted model cannot be simulated on the validation data (the state diverged)")
-        return
-    need = max(THRESHOLD_POINTS, NOISE_FACTOR * ev.spread)
-    if ev.gain < need:
-        ev.reasons.append(f"validation gain {ev.gain:.2f} below {need:.2f} points")
-    if not ev.bic_delta < 0:
-        ev.reasons.append(f"BIC does not improve ({ev.bic_delta:+.1f})")
+    """The acceptance rules (decision.judge) with the fit's parameters on a search bound."""
+    bounds = {}
+    if res.ok:
+        for fp in ev.candidate.free:
+            side = res.at_bound(fp.key)
+            if side is not None:
+                bounds[fp.key] = side
+    judge(ev, bounds)
 
 
 def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str], draws: int = NOISE_DRAWS) -> float:
@@ -339,49 +287,55 @@ class Selection:
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
            max_effects: int = MAX_EFFECTS, log=None, backend=None) -> Selection:
+    """Greedy forward selection and the backward pass (decision.forward, decision.backward) with the
+    simulator-based steps: a round of candidate fits, the validation score, a refit without one effect."""
     log = log or (lambda msg: None)
-    accepted: list[tuple[Candidate, dict]] = []
-    accepted_evals: list[Evaluation] = []
-    rounds: list[list[Evaluation]] = []
-    model = base_spec
-    values: dict[str, float] = {}
-    pool = list(cands)
     ceiling = score_ceiling(st, st.val.joints)
-    stopped = "no candidate passed"
-    for r in range(1, max_effects + 1):
-        base_out = st.val_runner.simulate(model, st.val.n)
-        base_cost = float(np.sum(st.est.residuals(st.est_runner.simulate(model, st.est.n)) ** 2))
-        score = float(np.mean([v["score"] for v in st.val.fits(base_out).values()]))
-        if r > 1 and ceiling - score < THRESHOLD_POINTS:
-            stopped = f"score {score:.1f} within {THRESHOLD_POINTS:g} points of its noise ceiling {ceiling:.1f}"
-            break
-        if not pool:
-            stopped = "no candidates left"
-            break
-        evals = evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress,
-                             backend=backend)
-        rounds.append(evals)
-        ok = [e for e in evals if e.accepted_ok]
-        if not ok:
-            stopped = "no candidate passed" if r == 1 else "no further candidate passed"
-            break
-        best = max(ok, key=lambda e: e.gain)
-        log(f"round {r}: accepted {best.candidate.label} ({best.gain:+.2f} points)")
-        accepted.append((best.candidate, best.effect_params()))
-        accepted_evals.append(best)
-        values.update(best.values)
-        model = model_with(model, [], best.candidate, best.values)
-        done = {(c.effect, c.joint) for c, _ in accepted}
-        # a large effect masks the others: every remaining candidate gets another chance
-        pool = [c for c in cands if (c.effect, c.joint) not in done]
-    else:
-        stopped = f"reached {max_effects} effects"
+    base = _Baseline(st)
+
+    def evaluate_round(pool, model, accepted, r):
+        base_out, base_cost = base.outputs(model), base.cost(model)
+        return evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress,
+                            backend=backend)
+
+    fw = forward(cands, base_spec, evaluate_round=evaluate_round,
+                 extend=lambda model, ev: model_with(model, [], ev.candidate, ev.values),
+                 score=base.score, ceiling=ceiling, max_effects=max_effects, log=log)
+    model, accepted = fw.model, fw.accepted
     if len(accepted) >= 2:
-        model, accepted, accepted_evals = backward(st, base_spec, model, accepted, accepted_evals, log)
-        values = {}
-        for ev in accepted_evals:
-            values.update(ev.values)
-    return Selection(accepted_evals, rounds, model, values, stopped, ceiling)
+        def refit_without(model, ev, rest):
+            minus = without(base_spec, model, ev.candidate)
+            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys)
+            res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
+            return res.spec, base.score(res.spec)
+
+        model, accepted = _backward(accepted, model, base.score(model), refit_without, log)
+    values: dict[str, float] = {}
+    for ev in accepted:
+        values.update(ev.values)
+    return Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling)
+
+
+class _Baseline:
+    """The current model's validation outputs, score and estimation cost (simulated once per model)."""
+
+    def __init__(self, st: Setting):
+        self.st = st
+        self._out: dict[int, tuple] = {}
+
+    def outputs(self, model) -> Outputs:
+        hit = self._out.get(id(model))
+        if hit is None or hit[0] is not model:
+            hit = (model, self.st.val_runner.simulate(model, self.st.val.n))
+            self._out = {id(model): hit}
+        return hit[1]
+
+    def score(self, model) -> float:
+        return float(np.mean([v["score"] for v in self.st.val.fits(self.outputs(model)).values()]))
+
+    def cost(self, model) -> float:
+        st = self.st
+        return float(np.sum(st.est.residuals(st.est_runner.simulate(model, st.est.n)) ** 2))
 
 
 def without(base_spec, model, cand: Candidate):
@@ -393,24 +347,3 @@ def without(base_spec, model, cand: Candidate):
     else:
         s.disable_effect(cand.effect, cand.joint)
     return s
-
-
-def backward(st: Setting, base_spec, model, accepted, evals, log):
-    """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
-    an early pick can be a stand-in for effects named later."""
-    score = lambda out: float(np.mean([v["score"] for v in st.val.fits(out).values()]))
-    full = score(st.val_runner.simulate(model, st.val.n))
-    for i in reversed(range(len(accepted))):
-        cand = accepted[i][0]
-        rest = accepted[:i] + accepted[i + 1:]
-        minus = without(base_spec, model, cand)
-        free = free_list(minus, None, rest, st.calib_keys)
-        res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
-        drop = full - score(st.val_runner.simulate(res.spec, st.val.n))
-        if drop < THRESHOLD_POINTS:
-            log(f"backward: dropped {cand.label} (removing it costs {drop:.2f} points)")
-            evals[i].reasons.append(f"dropped in the backward pass: removing it costs only {drop:.2f} points")
-            model = res.spec
-            accepted, evals = rest, evals[:i] + evals[i + 1:]
-            full = score(st.val_runner.simulate(model, st.val.n))
-    return model, accepted, evals

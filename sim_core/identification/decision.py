@@ -1,0 +1,304 @@
+"""The decision rules of ``diagnose``, as small pure functions over candidate scores.
+
+Nothing here simulates: the scores arrive in :class:`Evaluation` objects and the steps that need the
+simulator (fit a round of candidates, score a model, refit without an effect, refit the final model)
+are passed in as callables. selection.py and diagnosis.py wire the real, simulator-based ones; the
+tests (tests/test_decision_rules.py) wire synthetic ones, so each rule can be checked on its own.
+
+The rules, in the order they apply:
+
+* acceptance (:func:`judge`): gain >= max(2 points, 3 x the noise spread of the gain); BIC improves;
+  no parameter on a search bound other than the one where the effect vanishes; at least one
+  parameter more than 3 sigma from "no effect";
+* forward selection (:func:`forward`): each round every remaining candidate is refitted with what
+  is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
+  when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
+* backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
+  less than 2 points is dropped (an early pick can stand in for effects named later);
+* final check (:func:`final_check`): in the refitted final model each named effect must still be
+  worth 2 points, else the weakest is dropped and the rest refitted;
+* ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
+  the choice ambiguous, with the measurement that would decide (``decided_by``);
+* verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
+  (extended or not) still misses the record by far, ``discrepancy`` when effects are named,
+  ``no_significant_discrepancy`` otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from .candidates import Candidate, decider
+
+THRESHOLD_POINTS = 2.0      # smallest validation gain that counts (research note: 2 points)
+NOISE_FACTOR = 3.0          # ... or 3 x the noise spread of the gain, when larger
+SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
+AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
+MAX_EFFECTS = 3
+FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
+
+NAMED = "discrepancy"
+NONE = "no_significant_discrepancy"
+UNEXPLAINED = "unexplained_discrepancy"
+
+
+@dataclass
+class Evaluation:
+    """One candidate fitted and scored on the validation data (gains in NRMSE points)."""
+
+    candidate: Candidate
+    values: dict[str, float]                  # every fitted key (effect and calibration)
+    sigma: dict[str, float]
+    ci95: dict[str, list[float]]
+    cost: float
+    fits: dict[str, dict[str, float]]         # validation fits per joint
+    gain: float = 0.0
+    gain_channels: dict[str, float] = field(default_factory=dict)
+    spread: float = 0.0
+    bic_delta: float = 0.0
+    significance: dict[str, float] = field(default_factory=dict)
+    bounds: dict[str, str] = field(default_factory=dict)
+    reasons: list[str] = field(default_factory=list)
+    sims: int = 0
+    round: int = 1
+    outputs: Any = None
+    base_score: float = math.nan              # the model it is compared with, on the same joints
+
+    @property
+    def accepted_ok(self) -> bool:
+        return not self.reasons
+
+    @property
+    def key(self) -> tuple[str, str | None]:
+        return self.candidate.effect, self.candidate.joint
+
+    @property
+    def explained_pct(self) -> float:
+        return residual_explained_pct(self.gain, self.base_score)
+
+    def effect_params(self) -> dict[str, float]:
+        """The candidate's own parameters (effect keys), by parameter name."""
+        return {fp.key.split(".")[-1]: self.values[fp.key] for fp in self.candidate.free}
+
+
+# ---- readable scale ---------------------------------------------------------------------------------
+def residual_explained_pct(gain: float, base_score: float) -> float:
+    """Share (percent) of the baseline residual a gain removes. A score is a mean of NRMSE fits
+    100 (1 - |r| / |y - mean y|), so a gain of g points on a base score b shrinks the normalised
+    residual 1 - b/100 by g/100: the share is 100 g / (100 - b). Thousands of points on a runaway
+    baseline read as a share near 100 %; NaN when the base is unknown or already perfect."""
+    if not (math.isfinite(gain) and math.isfinite(base_score)) or base_score >= 100.0:
+        return math.nan
+    return 100.0 * gain / (100.0 - base_score)
+
+
+# ---- acceptance ---------------------------------------------------------------------------------------
+def required_gain(spread: float) -> float:
+    """The gain a candidate must reach: 2 points, or 3 x the gain's noise spread when larger."""
+    return max(THRESHOLD_POINTS, NOISE_FACTOR * spread)
+
+
+def null_side(lower: float, upper: float, null: float | None) -> str | None:
+    """Which search bound is the value where the effect vanishes ('lower'/'upper'), if either."""
+    if null is None or math.isnan(null):
+        return None
+    if null <= lower + 1e-12 * max(1.0, abs(lower)):
+        return "lower"
+    if null >= upper - 1e-12 * max(1.0, abs(upper)):
+        return "upper"
+    return None
+
+
+def judge(ev: Evaluation, at_bound: dict[str, str]) -> None:
+    """Apply the acceptance rules to ``ev``; ``at_bound`` names the parameters the fit left on a
+    search bound ('lower'/'upper'). The reasons a candidate fails are kept for the report."""
+    significant = 0
+    for fp in ev.candidate.free:
+        key = fp.key
+        sig = ev.sigma.get(key, math.inf)
+        ref = 0.0 if fp.null is None or not math.isfinite(fp.null) else fp.null
+        t = abs(ev.values[key] - ref) / sig if sig > 0 and math.isfinite(sig) else 0.0
+        ev.significance[key] = t
+        bound = at_bound.get(key)
+        if bound is not None:
+            ev.bounds[key] = bound
+            if bound == null_side(fp.lower, fp.upper, fp.null):
+                continue                      # at the value where the effect vanishes: absent
+            ev.reasons.append(f"{key.split('.')[-1]} at its {bound} search bound")
+            continue
+        if t > SIGNIFICANCE:
+            significant += 1
+    if not significant and not any("search bound" in r for r in ev.reasons):
+        ev.reasons.append(f"no parameter differs from 'no effect' by {SIGNIFICANCE:g} sigma")
+    if not math.isfinite(ev.gain):
+        ev.reasons.append("the fitted model cannot be simulated on the validation data (the state diverged)")
+        return
+    need = required_gain(ev.spread)
+    if ev.gain < need:
+        ev.reasons.append(f"validation gain {ev.gain:.2f} below {need:.2f} points")
+    if not ev.bic_delta < 0:
+        ev.reasons.append(f"BIC does not improve ({ev.bic_delta:+.1f})")
+
+
+# ---- forward selection ----------------------------------------------------------------------------------
+def best_passing(evals: list[Evaluation]) -> Evaluation | None:
+    """The candidate that joins the model: the largest gain among those that pass."""
+    ok = [e for e in evals if e.accepted_ok]
+    return max(ok, key=lambda e: e.gain) if ok else None
+
+
+def near_ceiling(score: float, ceiling: float) -> bool:
+    """Within the threshold of the noise ceiling nothing more can be shown: stop searching."""
+    return ceiling - score < THRESHOLD_POINTS
+
+
+@dataclass
+class Forward:
+    accepted: list[Evaluation]
+    rounds: list[list[Evaluation]]
+    model: Any
+    stopped: str
+
+
+def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: Callable, score: Callable,
+            ceiling: float, max_effects: int = MAX_EFFECTS, log=None) -> Forward:
+    """Greedy forward selection.
+
+    ``evaluate_round(pool, model, accepted, round)`` fits and judges every candidate of ``pool`` on
+    ``model`` (``accepted``: [(candidate, params)] already in it) and returns their Evaluations;
+    ``extend(model, ev)`` is ``model`` with ``ev``'s candidate at its fitted values; ``score(model)``
+    its validation score."""
+    log = log or (lambda msg: None)
+    accepted: list[Evaluation] = []
+    rounds: list[list[Evaluation]] = []
+    pool = list(cands)
+    stopped = "no candidate passed"
+    for r in range(1, max_effects + 1):
+        if r > 1:
+            s = score(model)
+            if near_ceiling(s, ceiling):
+                stopped = f"score {s:.1f} within {THRESHOLD_POINTS:g} points of its noise ceiling {ceiling:.1f}"
+                break
+        if not pool:
+            stopped = "no candidates left"
+            break
+        evals = evaluate_round(pool, model, [(e.candidate, e.effect_params()) for e in accepted], r)
+        rounds.append(evals)
+        best = best_passing(evals)
+        if best is None:
+            stopped = "no candidate passed" if r == 1 else "no further candidate passed"
+            break
+        log(f"round {r}: accepted {best.candidate.label} ({best.gain:+.2f} points)")
+        accepted.append(best)
+        model = extend(model, best)
+        done = {e.key for e in accepted}
+        # a large effect masks the others: every remaining candidate gets another chance
+        pool = [c for c in cands if (c.effect, c.joint) not in done]
+    else:
+        stopped = f"reached {max_effects} effects"
+    return Forward(accepted, rounds, model, stopped)
+
+
+# ---- backward pass and final check ----------------------------------------------------------------------
+def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None):
+    """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
+    an early pick can be a stand-in for effects named later. ``full``: the score of ``model``;
+    ``refit_without(model, ev, rest)`` -> (model without ``ev``, the rest refitted; its score).
+    Returns (model, accepted)."""
+    log = log or (lambda msg: None)
+    for i in reversed(range(len(accepted))):
+        ev = accepted[i]
+        rest = accepted[:i] + accepted[i + 1:]
+        minus, s = refit_without(model, ev, rest)
+        drop = full - s
+        if drop < THRESHOLD_POINTS:
+            log(f"backward: dropped {ev.candidate.label} (removing it costs {drop:.2f} points)")
+            ev.reasons.append(f"dropped in the backward pass: removing it costs only {drop:.2f} points")
+            model, accepted, full = minus, rest, s
+    return model, accepted
+
+
+def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Callable, remove: Callable, log=None):
+    """Every named effect must still be worth the threshold in the refitted final model.
+
+    ``refit(model, chosen)`` -> a fit (opaque); ``worth(fit, chosen)`` -> points each effect is worth
+    in it (the score with it minus without it); ``remove(fit, ev)`` -> the fitted model without
+    ``ev``. The weakest effect under the threshold is dropped and the rest refitted, until all pass.
+    Returns (chosen, the last fit or None when nothing is left)."""
+    log = log or (lambda msg: None)
+    chosen = list(chosen)
+    fit = None
+    while chosen:
+        fit = refit(model, chosen)
+        w = worth(fit, chosen)
+        k = min(range(len(w)), key=lambda i: w[i])
+        if w[k] >= THRESHOLD_POINTS:
+            break
+        ev = chosen.pop(k)
+        ev.reasons.append(f"dropped in the final check: removing it from the refitted model costs only {w[k]:.2f} points")
+        log(f"final check: dropped {ev.candidate.label} ({w[k]:.2f} points)")
+        model, fit = remove(fit, ev), None
+    return chosen, fit
+
+
+# ---- ambiguity ------------------------------------------------------------------------------------------
+def ambiguous(winner: Evaluation, runner_up: Evaluation) -> bool:
+    """A runner-up of another candidate whose gain is within 20 % of the winner's."""
+    return runner_up.gain >= AMBIGUITY * winner.gain and runner_up.key != winner.key
+
+
+def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: bool) -> dict:
+    """The runner-up of the winner's round, whether the choice is ambiguous, and what would decide."""
+    others = [e for e in round_evals if e is not winner]
+    if not others:
+        return {}
+    ru = max(others, key=lambda e: e.gain)
+    out: dict = {"runner_up": {"effect": ru.candidate.effect, "joint": ru.candidate.joint, "gain": round(ru.gain, 3),
+                               "residual_explained_pct": _pct(ru.explained_pct)}}
+    if ambiguous(winner, ru):
+        out["ambiguous"] = True
+        out["decided_by"] = decider(winner.candidate.effect, ru.candidate.effect, have_pressures)
+    else:
+        out["ambiguous"] = False
+    return out
+
+
+# ---- verdict ----------------------------------------------------------------------------------------------
+def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, float], residual_fails: bool,
+                        base_score: float | None = None) -> list[str]:
+    """Why the final model (the extended one, or the baseline when nothing is named) does not
+    explain the record; empty when it does.
+
+    * an angle fit below zero on a diagnosed joint: the model is further from the record than its
+      mean is;
+    * its score more than FAR_POINTS below the noise ceiling while the residual tests fail (the
+      misfit is in the data, not in the noise), and the named effects, if any, closed less than half
+      of the baseline's distance to the ceiling (a named cause must explain the record)."""
+    why = []
+    below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
+    if below:
+        why.append("angle fit below zero on " + ", ".join(f"{j} ({f:.1f} %)" for j, f in below.items()))
+    gap = ceiling - score
+    if gap > FAR_POINTS and residual_fails:
+        closed = None
+        if base_score is not None and ceiling - base_score > 0:
+            closed = 1.0 - gap / (ceiling - base_score)
+        if closed is None or closed < 0.5:
+            why.append(f"score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} "
+                       f"(more than {FAR_POINTS:g}) and the residual tests fail"
+                       + (f"; the named effects close {100 * closed:.0f} % of the baseline's distance" if closed is not None else ""))
+    return why
+
+
+def verdict(named: bool, unexplained: bool) -> str:
+    """``unexplained_discrepancy`` overrides a named cause: a cause that leaves the record unexplained
+    is not reported as the cause."""
+    if unexplained:
+        return UNEXPLAINED
+    return NAMED if named else NONE
+
+
+def _pct(v: float):
+    return None if not math.isfinite(v) else round(float(v), 1)

@@ -1,0 +1,336 @@
+"""Every decision rule of ``diagnose`` on synthetic candidate scores (no simulation).
+
+Each test sets up scores on both sides of one rule, so deleting or inverting the rule fails it:
+acceptance (gain threshold, noise spread, BIC, search bound, 3-sigma identifiability), forward
+selection (best passing wins; a masked effect is re-evaluated next round; stop at the noise
+ceiling), backward pass, final check, ambiguity and ``decided_by``, the verdict with its residual
+evidence, and the readable gain scale.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim_core.identification import decision as dc
+from sim_core.identification.candidates import DEFAULT_DECIDER, SAME_EFFECT, Candidate, decider
+from sim_core.identification.parameters import FreeParameter
+from sim_core.identification.residual_evidence import dominant_band, joint_evidence, locate, residual_fails, worst_channel
+
+
+def cand(effect="deadband", joint="j2", params=(("width", 0.0, 2.0, 0.0),)):
+    """A candidate with parameters (name, lower, upper, null)."""
+    return Candidate(effect, joint, [FreeParameter(f"effects.{effect}.{joint}.{p}", lo, hi, null=null)
+                                     for p, lo, hi, null in params])
+
+
+def scored(c, values=None, sigma=0.1, gain=5.0, spread=0.1, bic=-10.0, base_score=80.0):
+    """An Evaluation of ``c``: every parameter at 1.0 (or ``values``) with ``sigma``."""
+    values = values or {fp.key: 1.0 for fp in c.free}
+    return dc.Evaluation(c, dict(values), {k: sigma for k in values}, {}, 1.0, {}, gain=gain, spread=spread,
+                         bic_delta=bic, base_score=base_score)
+
+
+def judged(ev, at_bound=None):
+    dc.judge(ev, at_bound or {})
+    return ev
+
+
+# ---- acceptance ------------------------------------------------------------------------------------
+def test_a_candidate_that_meets_every_rule_is_accepted():
+    ev = judged(scored(cand()))
+    assert ev.accepted_ok, ev.reasons
+    assert ev.significance["effects.deadband.j2.width"] == pytest.approx(10.0)
+
+
+def test_gain_threshold_is_two_points():
+    below = judged(scored(cand(), gain=dc.THRESHOLD_POINTS - 0.1, spread=0.0))
+    above = judged(scored(cand(), gain=dc.THRESHOLD_POINTS + 0.1, spread=0.0))
+    assert not below.accepted_ok and any("validation gain" in r for r in below.reasons)
+    assert above.accepted_ok, above.reasons
+    assert dc.THRESHOLD_POINTS == 2.0
+
+
+def test_noise_spread_raises_the_threshold_to_three_spreads():
+    assert dc.required_gain(0.1) == dc.THRESHOLD_POINTS
+    assert dc.required_gain(2.0) == pytest.approx(6.0)
+    noisy = judged(scored(cand(), gain=5.0, spread=2.0))          # needs 6
+    quiet = judged(scored(cand(), gain=5.0, spread=1.5))          # needs 4.5
+    assert not noisy.accepted_ok and any("below 6.00 points" in r for r in noisy.reasons)
+    assert quiet.accepted_ok, quiet.reasons
+
+
+def test_bic_must_improve():
+    worse = judged(scored(cand(), bic=+1.0))
+    unknown = judged(scored(cand(), bic=math.inf))
+    better = judged(scored(cand(), bic=-1.0))
+    assert any("BIC" in r for r in worse.reasons) and any("BIC" in r for r in unknown.reasons)
+    assert better.accepted_ok, better.reasons
+
+
+def test_a_parameter_on_a_search_bound_rejects_unless_it_is_where_the_effect_vanishes():
+    two = cand(params=(("width", 0.0, 2.0, 0.0), ("gain", 0.5, 3.0, 1.0)))
+    key_w, key_g = (fp.key for fp in two.free)
+    # width at the far (upper) bound: the search range cut the fit short
+    far = judged(scored(two), {key_w: "upper"})
+    assert not far.accepted_ok and any("width at its upper search bound" in r for r in far.reasons)
+    assert far.bounds == {key_w: "upper"}
+    # width at its lower bound, which is its null (no deadband): absent, not a failure; gain decides
+    null = judged(scored(two, values={key_w: 0.0, key_g: 2.0}), {key_w: "lower"})
+    assert null.accepted_ok, null.reasons
+    # a null strictly inside the range: either bound is a failure
+    inner = judged(scored(two), {key_g: "lower"})
+    assert any("gain at its lower search bound" in r for r in inner.reasons)
+
+
+def test_identifiability_needs_one_parameter_three_sigma_from_no_effect():
+    weak = judged(scored(cand(), values={"effects.deadband.j2.width": 0.29}, sigma=0.1))
+    strong = judged(scored(cand(), values={"effects.deadband.j2.width": 0.31}, sigma=0.1))
+    assert any("3 sigma" in r for r in weak.reasons)
+    assert strong.accepted_ok, strong.reasons
+    # measured from the null, not from zero: a refit of a nominal deadband of 1.2 that stays at 1.21
+    refit = cand(params=(("width", 0.0, 4.0, 1.2),))
+    same = judged(scored(refit, values={"effects.deadband.j2.width": 1.21}, sigma=0.1))
+    wider = judged(scored(refit, values={"effects.deadband.j2.width": 1.6}, sigma=0.1))
+    assert any("3 sigma" in r for r in same.reasons)
+    assert wider.accepted_ok, wider.reasons
+    # an unknown sigma identifies nothing
+    assert any("3 sigma" in r for r in judged(scored(cand(), sigma=math.inf)).reasons)
+
+
+def test_a_diverged_candidate_is_rejected():
+    ev = judged(scored(cand(), gain=-math.inf))
+    assert any("diverged" in r for r in ev.reasons)
+
+
+# ---- forward selection ------------------------------------------------------------------------------
+A, B, C = cand("deadband"), cand("backlash"), cand("delay")
+
+
+def table_round(table, calls):
+    """evaluate_round from a table {(accepted labels, candidate label): (gain, bic)}; judged for real."""
+    def evaluate_round(pool, model, accepted, r):
+        done = frozenset(c.label for c, _ in accepted)
+        assert model == done
+        calls.append((r, [c.label for c in pool]))
+        evs = []
+        for c in pool:
+            gain, bic = table[(done, c.label)]
+            evs.append(judged(scored(c, gain=gain, bic=bic)))
+        return evs
+    return evaluate_round
+
+
+def run_forward(table, score=lambda m: 0.0, ceiling=100.0, max_effects=3):
+    calls = []
+    fw = dc.forward([A, B, C], frozenset(), evaluate_round=table_round(table, calls),
+                    extend=lambda m, ev: m | {ev.candidate.label}, score=score, ceiling=ceiling, max_effects=max_effects)
+    return fw, calls
+
+
+E = frozenset()
+
+
+def test_forward_takes_the_best_passing_candidate_and_reevaluates_masked_ones():
+    table = {
+        # round 1: backlash has the largest gain but fails BIC; delay is masked by the deadband
+        (E, A.label): (10.0, -5.0), (E, B.label): (12.0, +3.0), (E, C.label): (1.0, -1.0),
+        # round 2, with the deadband in the model: the delay shows
+        (frozenset({A.label}), B.label): (0.5, -1.0), (frozenset({A.label}), C.label): (6.0, -4.0),
+        (frozenset({A.label, C.label}), B.label): (0.3, -1.0),
+    }
+    fw, calls = run_forward(table)
+    assert [e.candidate.label for e in fw.accepted] == [A.label, C.label]
+    assert calls == [(1, [A.label, B.label, C.label]), (2, [B.label, C.label]), (3, [B.label])]
+    assert fw.model == {A.label, C.label}
+    assert fw.stopped == "no further candidate passed"
+    assert len(fw.rounds) == 3
+
+
+def test_forward_with_nothing_passing_names_nothing():
+    table = {(E, A.label): (1.0, -5.0), (E, B.label): (1.5, -1.0), (E, C.label): (0.2, -1.0)}
+    fw, calls = run_forward(table)
+    assert fw.accepted == [] and fw.stopped == "no candidate passed" and len(calls) == 1
+    assert dc.best_passing(fw.rounds[0]) is None
+
+
+def test_best_passing_ignores_a_larger_failing_gain():
+    ok = judged(scored(A, gain=4.0))
+    bad = judged(scored(B, gain=40.0, bic=1.0))
+    also = judged(scored(C, gain=3.0))
+    assert dc.best_passing([bad, also, ok]) is ok
+
+
+def test_forward_stops_within_two_points_of_the_noise_ceiling():
+    table = {(E, A.label): (10.0, -5.0), (E, B.label): (0.5, -1.0), (E, C.label): (0.5, -1.0),
+             (frozenset({A.label}), B.label): (5.0, -1.0), (frozenset({A.label}), C.label): (0.5, -1.0),
+             (frozenset({A.label, B.label}), C.label): (0.5, -1.0)}
+    near, calls = run_forward(table, score=lambda m: 98.5, ceiling=100.0)
+    assert [e.candidate.label for e in near.accepted] == [A.label]
+    assert "noise ceiling" in near.stopped and len(calls) == 1
+    far, calls = run_forward(table, score=lambda m: 97.5, ceiling=100.0)
+    assert [e.candidate.label for e in far.accepted] == [A.label, B.label] and len(calls) == 3
+    assert dc.near_ceiling(98.1, 100.0) and not dc.near_ceiling(97.9, 100.0)
+
+
+def test_forward_stops_at_max_effects():
+    table = {(E, A.label): (10.0, -5.0), (E, B.label): (3.0, -1.0), (E, C.label): (3.0, -1.0),
+             (frozenset({A.label}), B.label): (5.0, -1.0), (frozenset({A.label}), C.label): (0.5, -1.0)}
+    fw, calls = run_forward(table, max_effects=2)
+    assert len(fw.accepted) == 2 and fw.stopped == "reached 2 effects"
+
+
+# ---- backward pass and final check ----------------------------------------------------------------
+def test_backward_drops_a_stand_in_and_rescores_after_each_drop():
+    evs = [scored(A), scored(B), scored(C)]
+    # score of the model holding these effects (the rest refitted)
+    scores = {frozenset("ABC"): 90.0, frozenset("AB"): 85.0,      # the delay is worth 5: kept
+              frozenset("AC"): 89.5,                               # the backlash only 0.5: a stand-in
+              frozenset("C"): 87.8}                                # then the deadband is worth 1.7 < 2
+    short = {A.label: "A", B.label: "B", C.label: "C"}
+    asked = []
+
+    def refit_without(model, ev, rest):
+        m = model - {short[ev.candidate.label]}
+        asked.append((model, short[ev.candidate.label]))
+        assert m == frozenset(short[e.candidate.label] for e in rest)
+        return m, scores[m]
+
+    model, kept = dc.backward(evs, frozenset("ABC"), 90.0, refit_without)
+    assert asked == [(frozenset("ABC"), "C"), (frozenset("ABC"), "B"), (frozenset("AC"), "A")]
+    assert [short[e.candidate.label] for e in kept] == ["C"] and model == frozenset("C")
+    assert any("backward pass" in r for r in evs[1].reasons) and any("backward pass" in r for r in evs[0].reasons)
+    assert evs[2].accepted_ok
+
+
+def test_backward_keeps_effects_worth_the_threshold():
+    evs = [scored(A), scored(B)]
+    model, kept = dc.backward(evs, "AB", 90.0, lambda m, ev, rest: ("x", 87.9))
+    assert kept == evs and model == "AB"
+
+
+def test_final_check_drops_the_weakest_effect_under_the_threshold_and_refits():
+    evs = [scored(A), scored(B)]
+    short = {A.label: "A", B.label: "B"}
+    worth = {frozenset("AB"): [5.0, 1.0], frozenset("A"): [4.0]}     # points each effect is worth in the fit
+    refitted_from = []
+
+    def refit(model, chosen):
+        refitted_from.append(model)
+        return frozenset(short[e.candidate.label] for e in chosen)     # the fit "is" its effect set
+
+    chosen, fit = dc.final_check(evs, "start", refit=refit, worth=lambda fit, ch: worth[fit],
+                                 remove=lambda fit, ev: ("without", short[ev.candidate.label]))
+    assert chosen == [evs[0]] and fit == frozenset("A")
+    assert refitted_from == ["start", ("without", "B")]
+    assert any("final check" in r for r in evs[1].reasons) and evs[0].accepted_ok
+
+
+def test_final_check_keeps_all_when_each_is_worth_the_threshold_and_can_name_nothing():
+    evs = [scored(A), scored(B)]
+    chosen, fit = dc.final_check(evs, "m", refit=lambda m, ch: "fit", worth=lambda f, ch: [2.0, 2.5],
+                                 remove=lambda f, ev: "less")
+    assert chosen == evs and fit == "fit"
+    chosen, fit = dc.final_check([scored(A)], "m", refit=lambda m, ch: "fit", worth=lambda f, ch: [1.9],
+                                 remove=lambda f, ev: "less")
+    assert chosen == [] and fit is None
+
+
+# ---- ambiguity and decided_by ----------------------------------------------------------------------
+def test_runner_up_within_twenty_percent_is_ambiguous_with_what_would_decide():
+    db, cf = cand("deadband"), cand("coulomb_friction")
+    win = scored(db, gain=10.0)
+    close = dc.rivalry(win, [win, scored(cf, gain=8.5), scored(cand("delay"), gain=3.0)], have_pressures=False)
+    assert close["runner_up"]["effect"] == "coulomb_friction" and close["runner_up"]["gain"] == 8.5
+    assert close["ambiguous"] is True
+    assert close["decided_by"] == decider("deadband", "coulomb_friction", False)
+    assert close["decided_by"].startswith("chamber pressures")
+    # with pressures recorded, the pressures did not separate them: another excitation would
+    assert dc.rivalry(win, [win, scored(cf, gain=8.5)], True)["decided_by"].startswith(DEFAULT_DECIDER)
+    clear = dc.rivalry(win, [win, scored(cf, gain=7.5)], have_pressures=False)
+    assert clear["ambiguous"] is False and "decided_by" not in clear
+    assert dc.rivalry(win, [win], False) == {}
+
+
+def test_the_same_effect_elsewhere_decides_by_other_poses():
+    p2, p6 = cand("payload", "j2"), cand("payload", "j6")
+    win = scored(p2, gain=10.0)
+    r = dc.rivalry(win, [win, scored(p6, gain=9.5)], False)
+    assert r["ambiguous"] is True and r["decided_by"] == SAME_EFFECT
+    # a duplicate of the winner itself is no rival
+    assert dc.ambiguous(win, scored(cand("payload", "j2"), gain=10.0)) is False
+
+
+# ---- the readable scale --------------------------------------------------------------------------
+def test_gain_as_share_of_the_baseline_residual():
+    assert dc.residual_explained_pct(2.0, 80.0) == pytest.approx(10.0)
+    assert dc.residual_explained_pct(20.0, 80.0) == pytest.approx(100.0)
+    # a runaway baseline: thousands of points are most, not all, of the residual
+    assert dc.residual_explained_pct(2990.0, -3000.0) == pytest.approx(96.45, abs=0.01)
+    assert math.isnan(dc.residual_explained_pct(1.0, 100.0)) and math.isnan(dc.residual_explained_pct(1.0, math.nan))
+    assert scored(A, gain=5.0, base_score=50.0).explained_pct == pytest.approx(10.0)
+
+
+# ---- verdict ----------------------------------------------------------------------------------------
+def test_verdict_values():
+    assert dc.verdict(named=False, unexplained=False) == "no_significant_discrepancy"
+    assert dc.verdict(named=True, unexplained=False) == "discrepancy"
+    assert dc.verdict(named=True, unexplained=True) == "unexplained_discrepancy"
+    assert dc.verdict(named=False, unexplained=True) == "unexplained_discrepancy"
+
+
+def test_unexplained_when_the_model_misses_by_far_and_the_residual_is_not_noise():
+    why = lambda **kw: dc.unexplained_reasons(**({"angle_fits": {"j2": 80.0}} | kw))
+    far = 100.0 - dc.FAR_POINTS
+    # nothing named, far below the ceiling, residual tests fail
+    assert why(score=far - 1.0, ceiling=100.0, residual_fails=True)
+    # the same gap with a white, independent residual: the data show nothing to explain
+    assert not why(score=far - 1.0, ceiling=100.0, residual_fails=False)
+    # within FAR_POINTS of the ceiling: explained
+    assert not why(score=far + 1.0, ceiling=100.0, residual_fails=True)
+    # named effects that closed more than half of the baseline's distance explain the record ...
+    assert not why(score=far - 1.0, ceiling=100.0, residual_fails=True, base_score=60.0)
+    # ... less than half does not
+    assert why(score=far - 1.0, ceiling=100.0, residual_fails=True, base_score=85.0)
+
+
+def test_unexplained_when_an_angle_fit_is_below_zero():
+    r = dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": 90.0, "j3": -12.0}, residual_fails=False)
+    assert r and "j3" in r[0] and "j2" not in r[0]
+    assert dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": -math.inf}, residual_fails=False)
+    assert not dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": 0.5}, residual_fails=False)
+
+
+# ---- residual evidence ----------------------------------------------------------------------------
+def test_evidence_names_the_band_and_the_time_of_an_unmodelled_8_hz_mode():
+    from sim_core.identification.residual_tests import spectrum
+
+    rate = 200.0
+    t = np.arange(int(30 * rate)) / rate
+    rng = np.random.default_rng(4)
+    r = rng.normal(0, 1e-3, t.size)
+    burst = (t >= 10.0) & (t < 15.0)
+    r[burst] += 0.02 * np.sin(2 * np.pi * 8.0 * t[burst])
+    band = dominant_band(*spectrum(r, rate))
+    assert band["band_hz"][0] < 8.0 < band["band_hz"][1] and band["band_hz"][1] < 16.0
+    assert band["peak_hz"] == pytest.approx(8.0, abs=0.3) and band["band_share"] > 0.8
+    where = locate(t, r)
+    assert len(where["spans_s"]) == 1
+    a, b = where["spans_s"][0]
+    assert 9.0 <= a <= 10.0 and 15.0 <= b <= 16.0 and where["span_share"] > 0.9
+    # white residual: spread over the record, no band holds most of it
+    white = rng.normal(0, 1e-3, t.size)
+    assert locate(t, white)["spans_s"] == []
+    assert dominant_band(*spectrum(white, rate))["band_share"] < 0.6
+    ev = joint_evidence(t, r, spectrum(r, rate), {"angle": 95.0, "velocity": 40.0, "score": 67.5})
+    assert ev["channel"] == "velocity" and ev["channel_fit"] == 40.0
+
+
+def test_worst_channel_and_failing_residual_tests():
+    assert worst_channel({"angle": 90.0, "velocity": 70.0, "pressure": 20.0, "score": 60.0}) == ("pressure", 20.0)
+    assert worst_channel({"angle": -math.inf, "velocity": 70.0}) == ("angle", -math.inf)
+    white = {"ljung_box_p": 0.4, "independence": {"u": {"exceeds": False}}}
+    assert not residual_fails(white)
+    assert residual_fails(white | {"ljung_box_p": 1e-5})
+    assert residual_fails(white | {"independence": {"u": {"exceeds": False}, "|u|": {"exceeds": True}}})
+    assert not residual_fails({})
