@@ -188,7 +188,9 @@ def html_report(d: Diagnosis, data: dict) -> str:
     parts.append(f"<h1>Diagnosis of {e(d.record.source)} on {e(d.robot)}</h1>")
     verdict = data["verdict"]
     parts.append(f"<p><b>Verdict: {e(verdict)}</b> ({e(d.stopped)}).</p>")
-    if not d.selected:
+    if data.get("unexplained"):
+        parts.append(_unexplained_html(data))
+    elif not d.selected:
         parts.append("<p>No candidate extension improved the validation score by the threshold with identified "
                      "parameters: the model explains the data to within what the data can show.</p>")
     parts.append(f"<p>Validation: {e(d.validation.source)} from {d.validation.time[d.split]:.2f} s "
@@ -206,12 +208,12 @@ def html_report(d: Diagnosis, data: dict) -> str:
         parts.append("<table><tr><th>parameter</th><th>estimate</th><th>95 % interval</th><th>|est - none| / sigma</th></tr>"
                      f"{rows}</table>")
         gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
-        parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b> ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
+        parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b>{_share(s)} ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
                      f"BIC change {_fmt(s['bic_delta'])}." + (" Refit of an effect the nominal model already has." if s["refit_of_nominal"] else "") + "</p>")
         if "runner_up" in s:
             ru = s["runner_up"]
             parts.append(f"<p>Runner-up: {e(ru['effect'])}{' on ' + e(ru['joint']) if ru['joint'] else ''} "
-                         f"({ru['gain']:+.2f} points).")
+                         f"({ru['gain']:+.2f} points{_share(ru)}).")
             if s.get("ambiguous"):
                 parts.append(f" <b class='bad'>Ambiguous</b>: the margin is under 20 %. What would decide: {e(s['decided_by'])}.")
             parts.append("</p>")
@@ -250,7 +252,7 @@ def html_report(d: Diagnosis, data: dict) -> str:
         params = ", ".join(f"{k}={_fmt(v)}" for k, v in c["params"].items())
         why = "accepted" if c["accepted"] else "; ".join(c["rejected_because"])
         parts.append(f"<tr><td>{c['round']}</td><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td>"
-                     f"<td>{c['gain']:+.2f}</td><td>{_fmt(c['bic_delta'])}</td><td>{e(params)}</td>"
+                     f"<td>{c['gain']:+.2f}{_share(c)}</td><td>{_fmt(c['bic_delta'])}</td><td>{e(params)}</td>"
                      f"<td class='{'ok' if c['accepted'] else ''}'>{e(why)}</td></tr>")
     parts.append("</table>")
     # data checks
@@ -270,6 +272,47 @@ def html_report(d: Diagnosis, data: dict) -> str:
     parts.append(f"<li>fast integrator substep for the candidate fits: {_fmt(d.numerics.get('substep'))} s "
                  f"(checked on this record: {e(json.dumps(d.numerics.get('candidates', {})))})</li></ul>")
     parts.append("</body></html>")
+    return "".join(parts)
+
+
+def _share(item: dict) -> str:
+    """A gain's share of the baseline residual, beside its points."""
+    v = item.get("residual_explained_pct")
+    return "" if v is None else f", {v:.0f} % of the baseline residual"
+
+
+def _evidence_rows(evidence: dict) -> str:
+    e = html.escape
+    rows = []
+    for j, ev in evidence.items():
+        w, f = ev["where"], ev["frequency"]
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in w["spans_s"][:6]) or "spread over the record"
+        if len(w["spans_s"]) > 6:
+            spans += f" (+{len(w['spans_s']) - 6} more)"
+        band = f"{f['band_hz'][0]:.2g}-{f['band_hz'][1]:.2g} Hz ({100 * f['band_share']:.0f} %)" if f["band_hz"] else "-"
+        rows.append(f"<tr><td>{e(j)}</td><td>{e(str(ev['channel']))} ({_fmt(ev['channel_fit'])} %)</td>"
+                    f"<td>{e(spans)}" + (f" ({100 * w['span_share']:.0f} % of the residual)" if w["spans_s"] else "")
+                    + f"</td><td>{band}</td><td>{_fmt(f['peak_hz'])}</td>"
+                    f"<td>{'fail' if ev.get('tests_fail') else 'pass'}</td></tr>")
+    return "".join(rows)
+
+
+def _unexplained_html(data: dict) -> str:
+    """Why no named cause explains the record, the closest candidates, and where the residual is."""
+    e = html.escape
+    u = data["unexplained"]
+    parts = ["<h2 class='bad'>Unexplained discrepancy</h2><p>Neither the calibration nor any effect of the bank "
+             "explains the record: " + e("; ".join(u["because"])) + ". The model is not extended; the cause is "
+             "outside the bank (a supply or oil property, a structural mode, a different flow law, ...).</p>"]
+    if u.get("closest"):
+        rows = "".join(f"<tr><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td><td>{c['gain']:+.2f}</td>"
+                       f"<td>{_fmt(c.get('residual_explained_pct'))}</td></tr>" for c in u["closest"])
+        parts.append("<p>Closest candidates (they passed the acceptance rules but leave the record unexplained):</p>"
+                     "<table><tr><th>effect</th><th>joint</th><th>gain (points)</th><th>baseline residual explained (%)"
+                     f"</th></tr>{rows}</table>")
+    parts.append("<p>Where the remaining residual is (velocity residual on the validation data):</p><table><tr>"
+                 "<th>joint</th><th>worst channel (fit)</th><th>when</th><th>dominant band (share of power)</th>"
+                 f"<th>peak (Hz)</th><th>residual tests</th></tr>{_evidence_rows(u.get('evidence', {}))}</table>")
     return "".join(parts)
 
 
@@ -353,12 +396,25 @@ def write(d: Diagnosis, out_dir: str | Path, configured_spec, fmt: str = "html")
 
 def markdown_report(d: Diagnosis, data: dict) -> str:
     lines = [f"# Diagnosis of {d.record.source} on {d.robot}", "", f"**Verdict: {data['verdict']}** ({d.stopped})", ""]
+    u = data.get("unexplained")
+    if u:
+        lines += ["Unexplained: " + "; ".join(u["because"]) + ".", ""]
+        for c in u.get("closest", []):
+            lines.append(f"- closest: {c['effect']}" + (f" on {c['joint']}" if c["joint"] else "")
+                         + f", gain {c['gain']:+.2f} points{_share(c)}")
+        for j, ev in u.get("evidence", {}).items():
+            f, w = ev["frequency"], ev["where"]
+            lines.append(f"- {j}: worst channel {ev['channel']} ({_fmt(ev['channel_fit'])} %); "
+                         + (f"band {f['band_hz'][0]:.2g}-{f['band_hz'][1]:.2g} Hz, peak {_fmt(f['peak_hz'])} Hz; " if f["band_hz"] else "")
+                         + ("at " + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in w["spans_s"][:6]) if w["spans_s"]
+                            else "spread over the record"))
+        lines.append("")
     for s in d.selected:
         lines.append(f"## {s['effect']}" + (f" on {s['joint']}" if s["joint"] else ""))
         for k, v in s["params"].items():
             lo, hi = s["ci95"][k]
             lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
-        lines.append(f"- gain {s['gain']:+.2f} points")
+        lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
         lines.append("")
