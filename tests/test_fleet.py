@@ -95,6 +95,8 @@ def test_local_and_ray_give_identical_diagnoses(fleets):
     local, on_ray = fleets["local"][1], fleets["ray"][1]
     assert "on ray at" in fleets["ray"][0].stderr
     for name in GOOD:
+        for backend, (proc, d) in fleets.items():
+            assert (d / name / "diagnosis.json").is_file(), proc.stderr
         a = json.loads((local / name / "diagnosis.json").read_text())
         b = json.loads((on_ray / name / "diagnosis.json").read_text())
         assert without_timings(a) == without_timings(b), name
