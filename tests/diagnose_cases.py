@@ -27,6 +27,9 @@ class Case:
     joint: str                                    # the excited joint
     hidden: list[tuple[str, str | None, dict]]    # (effect, joint, {param: (lo, hi)})
     sign: dict = field(default_factory=dict)      # param -> True: random sign
+    # diagnose options for what the user knows about the record; a sensor offset is told from where
+    # the arm started only when the start pose is known (homed: --initial-pose spec)
+    options: list = field(default_factory=list)
 
 
 CASES = [
@@ -37,7 +40,8 @@ CASES = [
     Case("backlash", "hydrolek", "j2", [("backlash", "j2", {"width": (0.015, 0.03)})]),
     Case("area_ratio", "hydrolek", "j2", [("area_ratio", "j2", {"ratio": (0.55, 0.66)})]),
     Case("flow_saturation", "hydrolek", "j2", [("flow_saturation", "j2", {"max_flow": (2.0e-5, 2.8e-5)})]),
-    Case("sensor_offset", "hydrolek", "j2", [("sensor_offset", "j2", {"offset": (0.015, 0.035)})], sign={"offset": True}),
+    Case("sensor_offset", "hydrolek", "j2", [("sensor_offset", "j2", {"offset": (0.015, 0.035)})], sign={"offset": True},
+         options=["--initial-pose", "spec"]),
     Case("hysteresis", "hydrolek", "j2", [("hysteresis", "j2", {"width": (0.4, 0.8)})]),
     Case("bulk_modulus", "hydrolek", "j2", [("bulk_modulus", None, {"scale": (0.3, 0.5)})]),
     Case("joint_compliance", "hydrolek", "j2", [("joint_compliance", "j2", {"frequency": (3.0, 6.0)})]),
@@ -52,7 +56,7 @@ CASES = [
 CLEAN = [Case("clean_hydrolek", "hydrolek", "j2", []), Case("clean_harvester", "harvester", "boom", [])]
 TWO = [Case("deadband+sensor_offset", "hydrolek", "j2",
             [("deadband", "j2", {"width": (0.6, 1.0)}), ("sensor_offset", "j2", {"offset": (0.015, 0.03)})],
-            sign={"offset": True})]
+            sign={"offset": True}, options=["--initial-pose", "spec"])]
 
 
 def draw(case: Case):

@@ -11,7 +11,7 @@ import pytest
 from sim_core.dataset import Dataset
 from sim_core.excitation import multilevel_prbs
 from sim_core.identification import output_error as oe
-from sim_core.identification.calibration import IDENTIFIED_RATIO, calibrate, identifiability, plan
+from sim_core.identification.calibration import IDENTIFIED_RATIO, calibrate, identifiability, mark_conditional, plan
 from sim_core.identification.parameters import FreeParameter
 from sim_core.identification.record import first_reading, record_from_dataset, start_position
 from sim_core.identification.simulation import Runner, choose_numerics, model_spec
@@ -115,6 +115,14 @@ def test_identifiability_rule():
     assert v[flow] is None and "correlation" in v[ps]
     corr = [[1.0, 0.5], [0.5, 1.0]]
     assert identifiability(_result({ps: 1.4e7, flow: 4e-5}, {ps: 1e5, flow: 1e-7}, corr)) == {ps: None, flow: None}
+    # without pressures a load and the supply are one number: the load is kept, in either order
+    mass = "effects.payload.lift.mass"
+    corr = [[1.0, -0.997], [-0.997, 1.0]]
+    for keys in ((ps, mass), (mass, ps)):
+        v = identifiability(_result({k: {ps: 1.4e7, mass: 100.0}[k] for k in keys}, {ps: 1e5, mass: 1.0}, corr))
+        assert v[mass] is None and f"with {mass}" in v[ps]
+    rows = mark_conditional([{"parameter": mass}, {"parameter": ps, "not_identified_because": v[ps]}])
+    assert rows[0]["conditional_on"] == [ps] and "conditional_on" not in rows[1]
 
 
 def test_calibration_measures_what_the_record_identifies_and_keeps_the_rest_nominal(off_nominal):
@@ -235,3 +243,42 @@ def test_an_arm_started_elsewhere_is_not_a_sensor_offset(cli, shifted, tmp_path)
     d = json.loads((tmp_path / "spec" / "diagnosis.json").read_text())
     assert [s["effect"] for s in d["selected"]] == ["sensor_offset"]
     assert d["selected"][0]["params"]["offset"] == pytest.approx(0.05, rel=0.1)
+
+
+# ---- a rig nobody has characterised ---------------------------------------------------------------
+
+def test_a_rigs_wrong_nominal_parameters_are_calibration_findings_not_effects(cli, tmp_path):
+    """A template cylinder rig whose supply is 15 % low, valve 20 % larger and seals twice as stiff
+    as its robot.toml says, started 5 cm from its initial position, recorded under a P controller
+    without pressures: the calibration explains the misfit (no effect is named), says which numbers
+    it measured, and that supply and load cannot be told apart without pressures."""
+    from closed_loop_sim import closed_loop_columns
+    from sim_core.dataset import write_csv
+
+    cli("rig", "new", "cylinder", "--out", tmp_path / "rig", check=True)
+    spec = load_robot(tmp_path / "rig")
+    j = spec.joint_names[0]
+    truth = load_robot(tmp_path / "rig")
+    friction = f"joints.{j}.cylinder.viscous_friction"
+    truth.set("supply.pressure", 0.85 * spec.get("supply.pressure"))
+    truth.set(f"joints.{j}.valve.rated_flow", 1.2 * spec.get(f"joints.{j}.valve.rated_flow"))
+    truth.set(friction, 2.0 * max(spec.get(friction), 500.0))
+    truth.set(f"joints.{j}.initial_position", spec.get(f"joints.{j}.initial_position") + 0.05)
+    write_csv(tmp_path / "rec.csv", closed_loop_columns(truth, j, kp=40.0, duration=60.0, seed=4))
+    proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+    assert d["closed_loop"] is True
+    rows = {r["parameter"]: r for r in d["calibration"]["changes"]}
+    assert set(spec.estimated) - {f"joints.{j}.sensor.A", f"joints.{j}.sensor.B"} <= set(rows)
+    assert rows[friction]["identified"] and rows[friction]["value"] == pytest.approx(truth.get(friction), rel=0.3)
+    assert rows[f"joints.{j}.valve.rated_flow"]["identified"]
+    assert not rows["supply.pressure"]["identified"]
+    assert "correlation" in rows["supply.pressure"]["not_identified_because"]
+    assert rows["supply.pressure"]["value"] == spec.get("supply.pressure")
+    partner = rows["supply.pressure"]["not_identified_because"].split(" with ")[1].split(":")[0]
+    assert "supply.pressure" in rows[partner]["conditional_on"]
+    # where the record starts is not a sensor offset
+    assert not rows[f"effects.sensor_offset.{j}.offset"]["identified"]
+    assert d["data"]["initial_pose_source"][j] == "data"

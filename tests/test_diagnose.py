@@ -26,7 +26,7 @@ def test_every_effect_is_hidden_in_some_case():
 
 def run_case(cli, case, tmp_path, artifacts=None):
     meas, truth = generate(cli, case, tmp_path)
-    proc = cli("diagnose", "--robot", case.robot, meas, "--report", tmp_path / "rep", "--quiet")
+    proc = cli("diagnose", "--robot", case.robot, meas, "--report", tmp_path / "rep", "--quiet", *case.options)
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     if artifacts is not None:   # the confusion matrix of the README is compiled from these lines

@@ -270,7 +270,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
             cal_spec = final.spec
         else:
             cal_spec = reset
-    changes = [_row(fp, nominal, res, final, verdict[fp.key], why) for fp in free]
+    changes = mark_conditional([_row(fp, nominal, res, final, verdict[fp.key], why) for fp in free])
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
@@ -286,8 +286,8 @@ def identifiability(res: oe.FitResult) -> dict[str, str | None]:
         out[k] = None if ratio >= IDENTIFIED_RATIO else f"|value/sigma| = {ratio:.2g} < {IDENTIFIED_RATIO:g}"
     C = res.correlation
     if C is not None:
-        order = sorted(range(len(keys)), key=lambda i: keys[i].endswith(".valve.rated_flow"))
-        for a in order:            # flow gains last: the other member of a pair is the one dropped
+        order = sorted(range(len(keys)), key=lambda i: -keep_rank(keys[i]))
+        for a in order:            # of a correlated pair the one that ranks lower in KEEP_ORDER goes
             if out[keys[a]] is not None:
                 continue
             for b in range(len(keys)):
@@ -298,6 +298,32 @@ def identifiability(res: oe.FitResult) -> dict[str, str | None]:
                     out[keys[a]] = f"correlation {r:+.3f} with {keys[b]}: the record cannot tell them apart"
                     break
     return out
+
+
+# of two freed parameters the record cannot tell apart, the one listed first is kept: the flow gain
+# is the baseline; a load mass is what users of a rig most often do not know, a supply pressure is
+# read off a gauge, so without pressures the load carries what the two explain together
+KEEP_ORDER = (".valve.rated_flow", "effects.payload.", ".viscous_friction", "effects.sensor_gain.",
+              "effects.sensor_offset.", "fluid.bulk_modulus", "supply.pressure")
+
+
+def keep_rank(key: str) -> int:
+    for i, part in enumerate(KEEP_ORDER):
+        if part in key:
+            return i
+    return len(KEEP_ORDER)
+
+
+def mark_conditional(changes: list[dict]) -> list[dict]:
+    """A kept partner of a parameter dropped for their correlation carries what both explained: its
+    row says so (``conditional_on``: the parameters held at nominal that its value depends on)."""
+    for c in changes:
+        tail = f"with {c['parameter']}: the record cannot tell them apart"
+        for other in changes:
+            reason = other.get("not_identified_because") or ""
+            if reason.startswith("correlation") and reason.endswith(tail):
+                c.setdefault("conditional_on", []).append(other["parameter"])
+    return changes
 
 
 def _row(fp: FreeParameter, nominal: dict, first: oe.FitResult, final: oe.FitResult, reason: str | None,

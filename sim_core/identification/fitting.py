@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import output_error as oe
-from .calibration import identifiability, plan, scan_flow_gains
+from .calibration import identifiability, mark_conditional, plan, scan_flow_gains
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
@@ -157,7 +157,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             row["not_identified_because"] = verdict[k]
             result["parameters"][k]["not_identified_because"] = verdict[k]
         changes.append(row)
-    result["calibration"] = {"changes": changes, "held": held}
+    result["calibration"] = {"changes": mark_conditional(changes), "held": held}
     if out:
         configured = spec.copy()
         for k in keys:

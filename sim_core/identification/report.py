@@ -328,7 +328,9 @@ def _calibration_html(data: dict) -> str:
         ident = "yes" if c["identified"] else f"no: {c.get('not_identified_because', '')}"
         parts.append(f"<tr><td>{e(c['parameter'])}</td><td>{_fmt(c['nominal'])}</td><td>{_fmt(c['fitted'])}</td>"
                      f"<td>{_fmt(c['sigma'])}</td><td class='{'ok' if c['identified'] else 'bad'}'>{e(ident)}</td>"
-                     f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}</td><td>{e(c.get('why', ''))}</td></tr>")
+                     f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}"
+                     + (f" (given {e(', '.join(c['conditional_on']))} at nominal)" if c.get("conditional_on") else "")
+                     + f"</td><td>{e(c.get('why', ''))}</td></tr>")
     parts.append("</table>")
     if cal.get("held"):
         parts.append("<details><summary>nominal parameters not freed</summary><ul>"
