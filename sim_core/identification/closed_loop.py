@@ -68,6 +68,15 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
     return best
 
 
+def _unit(spec, joint: str) -> str:
+    if spec is None:
+        return "V per rad (or m)"
+    try:
+        return "V/m" if spec.tree.is_prismatic(spec.joint(joint).dof) else "V/rad"
+    except AttributeError:
+        return "V/rad"
+
+
 def detect(rec: Record, spec=None) -> dict:
     """Per commanded, measured joint: the evidence; ``closed_loop`` when any joint shows feedback,
     with the note for the report."""
@@ -79,5 +88,5 @@ def detect(rec: Record, spec=None) -> dict:
                    f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}"}
     if closed:
         out["note"] = NOTE.format(joints=", ".join(f"{j}: correlation {joints[j]['correlation']:+.2f}, K = "
-                                                   f"{joints[j]['gain']:.3g} V per rad (or m)" for j in closed))
+                                                   f"{joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
     return out
