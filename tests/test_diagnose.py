@@ -10,7 +10,7 @@ import json
 import pytest
 
 from sim_core.dataset import read_csv, write_csv
-from sim_core.effects import EFFECTS
+from sim_core.effects import EFFECTS, diagnosable
 from sim_core.identification.metrics import nrmse_fit
 from sim_core.identification.selection import THRESHOLD_POINTS
 
@@ -20,7 +20,7 @@ CONTRACT_TOP = {"robot", "verdict", "baseline", "extended", "selected", "candida
 
 
 def test_every_effect_is_hidden_in_some_case():
-    assert {name for c in CASES for name, _, _ in c.hidden} == set(EFFECTS)
+    assert {name for c in CASES for name, _, _ in c.hidden} == set(diagnosable())
     assert {c.robot for c in CASES} == {"hydrolek", "harvester"}
 
 

@@ -32,6 +32,9 @@ from sim_core.export.fmu_variables import interface, parameter_entries
 from sim_core.export.robot_snapshot import write_snapshot
 from sim_core.export.units import fmi_unit, for_joint_type
 from sim_core.model.spec import available_robots, load_robot
+from sim_core.rigs import TEMPLATES, new_rig
+
+DATA = Path(__file__).resolve().parent / "data"
 
 RATE = 200.0      # Hz: the input grid and the communication step
 DURATION = 4.0    # s
@@ -328,16 +331,26 @@ def test_model_description_is_the_robots_interface(robot, tmp_path):
 
 
 def test_robot_snapshot_loads_back_to_the_same_spec(tmp_path):
-    """The FMU's robot.toml is self-contained (arms expanded, defaults written) and loads back equal."""
-    for robot in available_robots():
-        spec = load_robot(robot)
-        spec.set(f"joints.{spec.joint_names[0]}.valve.rated_flow", 1.234567890123e-5)
+    """The FMU's robot.toml is self-contained (arms expanded, defaults written, keyword defaults such as
+    a direct cylinder's offset = 'auto', the [estimated] ranges) and loads back equal: built-in robots,
+    a prismatic rig and every `rig new` template."""
+    robots = [load_robot(r) for r in available_robots()] + [load_robot(DATA / "lift")]
+    for template in TEMPLATES:
+        toml_path, _, _ = new_rig(template, tmp_path / "rigs" / template)
+        robots.append(load_robot(toml_path))
+    for spec in robots:
+        robot = spec.name
+        assert spec.name != "lift" or spec.joints[0].components["cylinder"].values["offset"] == "auto"
+        path = f"joints.{spec.joint_names[0]}.valve.rated_flow"
+        spec.set(path, spec.parameters()[path] * 1.0123456789)
         back = load_robot(write_snapshot(spec, tmp_path / robot))
         assert back.parameters() == spec.parameters()
         assert [e.to_dict() for e in back.effects] == [e.to_dict() for e in spec.effects]
         assert back.tree.dof_names == spec.tree.dof_names
         tables = tomllib.loads((tmp_path / robot / "robot.toml").read_text())
         assert not {"arms", "defaults"} & set(tables)
+        assert back.estimated == spec.estimated
+    assert any(spec.estimated for spec in robots)
 
 
 def test_every_parameter_has_a_declared_unit():

@@ -32,6 +32,10 @@ class Parameter:
     def validate(self, value: Any, where: str) -> Any:
         """Return ``value`` converted to its kind, or raise :class:`ParameterError` naming ``where``."""
         label = f"{where}.{self.name}" if where else self.name
+        if self.default is not None and not isinstance(self.default, (int, float)) and value == self.default:
+            return self.default    # a keyword default ('auto', an unset vector) written out explicitly
+        if isinstance(self.default, tuple) and isinstance(value, list) and tuple(value) == self.default:
+            return self.default
         if self.kind == "float":
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 try:

@@ -42,8 +42,14 @@ def get_effect(name: str) -> type[Effect]:
         raise KeyError(f"unknown effect {name!r}; known effects: {', '.join(EFFECTS)}") from None
 
 
+def diagnosable() -> dict[str, type[Effect]]:
+    """The effects the diagnosis can fit (those that give ``Effect.candidate`` hints); the others
+    (stribeck_friction) are simulation-only: records made with them test out-of-bank behaviour."""
+    return {n: e for n, e in EFFECTS.items() if e.candidate.__func__ is not Effect.candidate.__func__}
+
+
 def catalog() -> list[dict]:
     return [e.describe() for e in EFFECTS.values()]
 
 
-__all__ = ["EFFECTS", "Effect", "EffectInstance", "catalog", "get_effect"]
+__all__ = ["EFFECTS", "Effect", "EffectInstance", "catalog", "diagnosable", "get_effect"]

@@ -39,6 +39,8 @@ def snapshot_data(spec) -> dict:
         data["passive"] = {d: _plain(s.values) for d, s in spec.passive.items()}
     if spec.effects:
         data["effects"] = [_plain(e.to_dict()) for e in spec.effects]
+    if spec.estimated:
+        data["estimated"] = {path: list(bounds) for path, bounds in spec.estimated.items()}
     return data
 
 

@@ -20,7 +20,8 @@ The rules, in the order they apply:
 * ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
   the choice ambiguous, with the measurement that would decide (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
-  (extended or not) still misses the record by far, ``discrepancy`` when effects are named,
+  (extended or not) still misses the record by far (an angle fit below zero, or more than 10 points
+  under the noise ceiling with failing residual tests), ``discrepancy`` when effects are named,
   ``no_significant_discrepancy`` otherwise.
 """
 
@@ -274,21 +275,21 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     * an angle fit below zero on a diagnosed joint: the model is further from the record than its
       mean is;
     * its score more than FAR_POINTS below the noise ceiling while the residual tests fail (the
-      misfit is in the data, not in the noise), and the named effects, if any, closed less than half
-      of the baseline's distance to the ceiling (a named cause must explain the record)."""
+      misfit is in the data, not in the noise). Named effects that closed most of a runaway
+      baseline's distance do not excuse it: a named cause must explain the record, not only beat
+      the baseline (``base_score`` only says how much of the distance they closed)."""
     why = []
     below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
     if below:
         why.append("angle fit below zero on " + ", ".join(f"{j} ({f:.1f} %)" for j, f in below.items()))
     gap = ceiling - score
     if gap > FAR_POINTS and residual_fails:
-        closed = None
-        if base_score is not None and ceiling - base_score > 0:
-            closed = 1.0 - gap / (ceiling - base_score)
-        if closed is None or closed < 0.5:
-            why.append(f"score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} "
-                       f"(more than {FAR_POINTS:g}) and the residual tests fail"
-                       + (f"; the named effects close {100 * closed:.0f} % of the baseline's distance" if closed is not None else ""))
+        text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} (more "
+                f"than {FAR_POINTS:g}) and its residual tests fail")
+        if base_score is not None and base_score < score and ceiling > base_score:
+            text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
+                     f"baseline's distance")
+        why.append(text)
     return why
 
 

@@ -310,7 +310,7 @@ def _unexplained_html(data: dict) -> str:
         parts.append("<p>Closest candidates (they passed the acceptance rules but leave the record unexplained):</p>"
                      "<table><tr><th>effect</th><th>joint</th><th>gain (points)</th><th>baseline residual explained (%)"
                      f"</th></tr>{rows}</table>")
-    parts.append("<p>Where the remaining residual is (velocity residual on the validation data):</p><table><tr>"
+    parts.append("<p>Where the remaining residual is (velocity residual of the closest model on the validation data):</p><table><tr>"
                  "<th>joint</th><th>worst channel (fit)</th><th>when</th><th>dominant band (share of power)</th>"
                  f"<th>peak (Hz)</th><th>residual tests</th></tr>{_evidence_rows(u.get('evidence', {}))}</table>")
     return "".join(parts)

@@ -1,0 +1,72 @@
+"""Synthetic 'real' records of a user's rig, as a test bench logs them: closed loop, 50 Hz, headerless.
+
+A P controller (run by the 'rig', not by the code under test) tracks operator-like steps with holds;
+the truth model is the rig's spec with its nominal parameters off by 10-30 % and one hidden effect;
+the logger writes `time (s), position (sensor volts), valve command (V)` with jittered timestamps and
+a start pose off the template's. Only the CSV reaches `hydrohil import` and `diagnose`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim_core.kernel import layout as L
+from sim_core.plant import Plant
+from sim_core.simulator import Simulator
+
+
+def reference_steps(lo: float, hi: float, duration: float, rng) -> callable:
+    """Piecewise-constant set points within [lo, hi] (joint units), held 1.5-4 s each."""
+    t, times, levels = 0.0, [], []
+    while t < duration:
+        times.append(t)
+        levels.append(rng.uniform(lo, hi))
+        t += rng.uniform(1.5, 4.0)
+    times, levels = np.array(times), np.array(levels)
+    return lambda tt: levels[np.searchsorted(times, tt, side="right") - 1]
+
+
+def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[str, float], seed: int,
+                       duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
+                       start_offset: float = 0.0, jitter: float = 0.1):
+    """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
+
+    ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
+    ``hidden``: (effect, params) switched on at the rig's one actuated joint; ``kp``: V per joint unit
+    (default: full command for 20 % of the range of motion)."""
+    rng = np.random.default_rng(seed)
+    plant = Plant.from_robot(rig_dir)
+    spec = plant.spec.copy()
+    joint = spec.joint_names[0]
+    for path, factor in off.items():
+        spec.set(path, spec.get(path) * factor)
+    if hidden is not None:
+        spec.enable_effect(hidden[0], joint, **hidden[1])
+    i = spec.tree.index(spec.joint(joint).dof)
+    lo_q, hi_q = float(spec.tree.lower[i]), float(spec.tree.upper[i])
+    span = hi_q - lo_q
+    q0 = float(spec.joint(joint).settings["initial_position"]) + start_offset
+    spec.set(f"joints.{joint}.initial_position", q0)
+    ctx = plant.create_context(spec, seed=seed)
+    sim = Simulator(ctx)
+    u_lo, u_hi = spec.joint(joint).command_range
+    kp = kp if kp is not None else u_hi / (0.2 * span)
+    ref = reference_steps(lo_q + 0.2 * span, hi_q - 0.2 * span, duration, rng)
+    A = float(spec.get(f"joints.{joint}.sensor.A"))
+    B = float(spec.get(f"joints.{joint}.sensor.B"))
+    rows = []
+    t = 0.0
+    y = sim.sample()[0]
+    while t < duration:
+        volts = float(y[L.YA_SENS_V])
+        pos = A * volts + B                      # the rig's controller reads its own sensor
+        u = float(np.clip(kp * (ref(t) - pos), u_lo, u_hi))
+        rows.append((t, volts, round(u, 3)))
+        dt = (1.0 + rng.uniform(-jitter, jitter)) / rate
+        y = sim.step(np.array([u]), dt)[0]
+        t += dt
+    return np.array(rows), spec
+
+
+def write_headerless(rows: np.ndarray, path) -> None:
+    np.savetxt(path, rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
