@@ -35,6 +35,10 @@ from datetime import date, timedelta
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+# the code this benchmark sits in, in this process and in every Ray worker it starts (they inherit the
+# environment), whatever hydrohil the interpreter has installed
+sys.path.insert(0, str(ROOT))
+os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
 
 
 def cli(*args):
