@@ -174,7 +174,15 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     m0 = model_spec(spec)
 
     # numerics for the many candidate fits, checked on this record
-    fast, numerics = choose_numerics(m0, rec, est.n)
+    # checked over every sample it will simulate: the estimation part and the validation part (a
+    # coarse step can hold on the first and drift on the second)
+    fast, numerics = choose_numerics(m0, rec)
+    if val is not None:
+        vchk, vnumerics = choose_numerics(m0, val)
+        numerics["validation"] = vnumerics
+        if (vchk.substep or 0.0) < (fast.substep or 0.0):
+            fast = Runner(rec, vchk.substep)
+            numerics["substep"] = vnumerics["substep"]
     vfast = Runner(vrec, fast.substep)
     accurate, vaccurate = Runner(rec), Runner(vrec)
     timings["numerics"] = time.perf_counter() - t_start

@@ -1,0 +1,60 @@
+"""The diagnosis's fast integrator step is checked on every channel it scores: a step that keeps the
+angles but not the chamber pressures (end-stop contact at a coarse step) is not chosen, and a step
+that diverges is reported as such."""
+
+import numpy as np
+
+from sim_core.dataset import Dataset
+from sim_core.excitation import multilevel_prbs
+from sim_core.identification.record import record_from_dataset
+from sim_core.identification.simulation import (ANGLE_TOLERANCE, PRESSURE_TOLERANCE, Outputs, choose_numerics,
+                                                close_enough, compare_outputs, model_spec)
+from sim_core.model.spec import load_robot
+from sim_core.plant import Plant
+from sim_core.simulator import Simulator
+
+
+def _record(spec, pressures=True):
+    """HydroLek shoulder and elbow driven together by unguarded +-4 V PRBS (the elbow often at its
+    end stops), 60 s at 200 Hz."""
+    t, U = multilevel_prbs(spec, "j2", levels=5, amplitude=4, duration=60.0, rate=200, seed=1, guard=False)
+    _, U3 = multilevel_prbs(spec, "j3", levels=5, amplitude=4, duration=60.0, rate=200, seed=2, guard=False)
+    U += U3
+    cols = Simulator(Plant(spec).create_context(seed=1)).run(t, U).dataset_columns()
+    if not pressures:
+        cols = {k: v for k, v in cols.items() if not k.startswith("p_")}
+    return record_from_dataset(Dataset(list(cols), np.column_stack(list(cols.values()))), spec, source="endstops")
+
+
+def test_pressures_decide_when_the_record_has_them():
+    spec = load_robot("hydrolek")
+    rec = _record(spec)
+    ref = Outputs({j: rec.angles[j] for j in rec.targets}, {j: rec.pressures[j] for j in rec.targets})
+    t = rec.time
+    # same angles, pressures off by a 2 Hz ripple of 20 % of their spread: angles pass, pressures fail
+    bent = {j: tuple(p + 0.2 * np.std(p) * np.sin(2 * np.pi * 2 * t) for p in ps) for j, ps in ref.pressures.items()}
+    entry = compare_outputs(ref, Outputs(ref.angles, bent), rec)
+    assert entry["angle_fit"] == 100.0 and entry["velocity_fit"] == 100.0
+    assert entry["pressure_fit"] < 100.0 - PRESSURE_TOLERANCE and not close_enough(entry)
+    # a ripple well inside the tolerance passes
+    slight = {j: tuple(p + 0.002 * np.std(p) * np.sin(2 * np.pi * 2 * t) for p in ps) for j, ps in ref.pressures.items()}
+    assert close_enough(compare_outputs(ref, Outputs(ref.angles, slight), rec))
+    # an angle off by more than its tolerance fails whatever the pressures
+    off = {j: a + 0.05 * np.std(a) for j, a in ref.angles.items()}
+    entry = compare_outputs(ref, Outputs(off, ref.pressures), rec)
+    assert entry["angle_fit"] < 100.0 - ANGLE_TOLERANCE and not close_enough(entry)
+
+
+def test_a_step_that_fails_a_channel_on_the_record_is_not_chosen():
+    """On the end-stop record the 2 ms step diverges or mangles a channel over the whole record;
+    the step chosen passes every channel; without pressure columns only angles and velocities count."""
+    spec = load_robot("hydrolek")
+    m = model_spec(spec)
+    _, report = choose_numerics(m, _record(spec))
+    coarse = report["candidates"]["0.002"]
+    assert coarse.get("diverged") or not close_enough(coarse)
+    assert report["substep"] < 0.002
+    chosen = report["candidates"].get(f"{report['substep']:g}")
+    assert chosen is None or (close_enough(chosen) and "pressure_fit" in chosen)
+    _, no_p = choose_numerics(m, _record(spec, pressures=False))
+    assert all("pressure_fit" not in c for c in no_p["candidates"].values())
