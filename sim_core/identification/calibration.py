@@ -258,21 +258,50 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     if not uncertainty or not res.ok:
         changes = [_row(fp, nominal, res, res, None, why) for fp in free]
         return Calibration(res.spec, res, free, changes)
-    verdict = identifiability(res)
-    keep = [fp for fp in free if verdict[fp.key] is None]
-    final, cal_spec = res, res.spec
-    if len(keep) < len(free):
+    # The parameters the fit cannot pin down go back to nominal and the rest are refitted. When none
+    # is identified the set is too large for the record (supply pressure, load, flow gain and sensor
+    # gain that together explain one feature of a closed-loop record without pressures, or a misfit
+    # dominated by an effect the model lacks): then only the weakest goes, and the rest are judged
+    # again, until some are identified.
+    keep, current = list(free), res
+    dropped: dict[str, tuple[str, oe.FitResult]] = {}
+    cal_spec = res.spec
+    while keep:
+        verdict = identifiability(current)
+        failing = [fp for fp in keep if verdict[fp.key] is not None]
+        if not failing:
+            break
+        every = len(failing) == len(keep)
+        if every:
+            failing = [min(failing, key=lambda fp: _strength(current, fp.key, verdict[fp.key]))]
+        for fp in failing:
+            dropped[fp.key] = (verdict[fp.key], current)
+        keep = [fp for fp in keep if fp not in failing]
         reset = spec.copy()
         for fp in free:
-            fp.apply(reset, res.values[fp.key] if verdict[fp.key] is None else nominal[fp.key])
+            fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         if keep:
-            final = oe.fit(runner, problem, reset, keep, max_sims=2 * (len(keep) + 1) + 4, uncertainty=True, tol=1e-3)
-            cal_spec = final.spec
+            current = oe.fit(runner, problem, reset, keep, max_sims=2 * (len(keep) + 1) + 4, uncertainty=True, tol=1e-3)
+            cal_spec = current.spec
         else:
             cal_spec = reset
-    changes = mark_conditional([_row(fp, nominal, res, final, verdict[fp.key], why) for fp in free])
+        if not every:
+            break
+    final = current
+    changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
+                                     dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
+
+
+def _strength(res: oe.FitResult, key: str, reason: str) -> tuple[int, float]:
+    """How well ``res`` pins ``key`` down: a parameter flagged for its correlation with another is
+    weaker than any judged by its own |value/sigma| (lowest first; of the correlated, the one
+    ranked later in KEEP_ORDER)."""
+    if reason.startswith("correlation"):
+        return (0, -float(keep_rank(key)))
+    v, s = res.values.get(key, 0.0), res.sigma.get(key, math.inf)
+    return (1, abs(v) / s if s > 0 and math.isfinite(s) else 0.0)
 
 
 def identifiability(res: oe.FitResult) -> dict[str, str | None]:

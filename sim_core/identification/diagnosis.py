@@ -201,6 +201,26 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the candidates refit the identified model parameters with themselves (an effect parameter the
     # calibration switched on stays at its calibrated value: the candidate of that effect refits it)
     keys = [k for k in cal.identified if not k.startswith("effects.")]
+    # a large effect the nominal model lacks (a wide deadband) can dominate the baseline misfit so that
+    # nothing calibrated is identified; once an effect is named the calibration is redone with it in
+    # the model, and what it identifies then is refitted with the candidates that follow
+    pending = [c["parameter"] for c in cal.changes if not c["identified"]]
+    recalibrations: list[dict] = []
+
+    def recalibrate(model, ev):
+        if not pending:
+            return model
+        again = calibrate(model, fast, est, free=pl.free, why=pl.why)
+        newly = [k for k in again.identified if k in pending]
+        recalibrations.append({"after": ev.candidate.label, "identified": again.identified, "newly_identified": newly,
+                               "changes": again.changes})
+        if not newly:
+            return model
+        log(f"recalibration with {ev.candidate.label}: {', '.join(newly)} now identified")
+        keys[:] = [k for k in again.identified if not k.startswith("effects.")]
+        for k in newly:
+            pending.remove(k)
+        return again.spec
     loop = detect_closed_loop(rec, spec)
     if loop["closed_loop"]:
         notes.append(loop["note"])
@@ -228,7 +248,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         noise = {j: check.noise[j] for j in targets}
     st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures))
-    sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend)
+    sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
+                 recalibrate=recalibrate)
     timings["selection"] = time.perf_counter() - t_start
 
     # final refit of the chosen model with the default integrator settings (two Gauss-Newton steps from
@@ -291,7 +312,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "sigma": {c["parameter"]: c["sigma"] for c in cal.changes}, "ci95": dict(cal.result.ci95),
              "changes": cal.changes, "held": pl.held,
              "identified": cal.identified, "not_identified": [c["parameter"] for c in cal.changes if not c["identified"]],
-             "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched]}
+             "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched],
+             "recalibrations": recalibrations}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected)

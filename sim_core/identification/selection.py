@@ -286,9 +286,11 @@ class Selection:
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
-           max_effects: int = MAX_EFFECTS, log=None, backend=None) -> Selection:
+           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None) -> Selection:
     """Greedy forward selection and the backward pass (decision.forward, decision.backward) with the
-    simulator-based steps: a round of candidate fits, the validation score, a refit without one effect."""
+    simulator-based steps: a round of candidate fits, the validation score, a refit without one effect.
+    ``recalibrate(model, ev)``: the model once ``ev``'s effect is in it, its calibration redone (it
+    may change ``st.calib_keys`` in place); None: the model as extended."""
     log = log or (lambda msg: None)
     ceiling = score_ceiling(st, st.val.joints)
     base = _Baseline(st)
@@ -299,7 +301,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                             backend=backend)
 
     fw = forward(cands, base_spec, evaluate_round=evaluate_round,
-                 extend=lambda model, ev: model_with(model, [], ev.candidate, ev.values),
+                 extend=lambda model, ev: _extend(model, ev, recalibrate),
                  score=base.score, ceiling=ceiling, max_effects=max_effects, log=log)
     model, accepted = fw.model, fw.accepted
     if len(accepted) >= 2:
@@ -314,6 +316,11 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     for ev in accepted:
         values.update(ev.values)
     return Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling)
+
+
+def _extend(model, ev: Evaluation, recalibrate):
+    extended = model_with(model, [], ev.candidate, ev.values)
+    return extended if recalibrate is None else recalibrate(extended, ev)
 
 
 class _Baseline:
