@@ -131,3 +131,13 @@ def test_bad_options_give_clear_errors(cli, tmp_path):
     assert proc.returncode == 2 and "no such file" in proc.stderr
     proc = cli("diagnose", "--robot", "hydrolek", csv, "--validation", tmp_path / "missing.csv", "--report", tmp_path / "r")
     assert proc.returncode == 2 and "missing.csv" in proc.stderr
+
+
+def test_reported_numbers_keep_six_significant_digits():
+    """Candidate parameters are reported to 6 significant digits: a leakage coefficient of order
+    1e-13 m^3/(s Pa) is not rounded to 0, and large numbers are not padded with false digits."""
+    from sim_core.identification.diagnosis import _num
+
+    assert _num(3.21e-13) == pytest.approx(3.21e-13, rel=1e-6)
+    assert _num(1234567.891) == 1234570.0
+    assert _num(float("nan")) is None and _num(None) is None

@@ -383,7 +383,8 @@ def _absent(fp: FreeParameter, v: float, ev: Evaluation) -> float:
 
 
 def _num(v: float):
-    return None if v is None or not math.isfinite(v) else round(float(v), 6)
+    """A JSON number to 6 significant digits (a leakage coefficient of 3e-13 m^3/(s Pa) is not 0)."""
+    return None if v is None or not math.isfinite(v) else float(f"{float(v):.6g}")
 
 
 def residual_tests(rec: Record, prob: oe.Problem, out: Outputs, start: int) -> dict:
