@@ -1,0 +1,75 @@
+"""A user's rig end to end: ``rig new`` -> a closed-loop log -> ``import`` -> ``diagnose``.
+
+Each template rig is run under a P controller (the rig's own, tests/rig_records.py) tracking
+operator-like steps; the truth has the valve 20 % larger and the supply 15 % lower than the written
+robot.toml says, starts 5 % of the stroke off the template's initial position, and is logged at
+50 Hz with jittered timestamps, the position in sensor volts and no pressures. Only the headerless
+log reaches the commands under test.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from rig_records import closed_loop_record, write_headerless
+from sim_core.dataset import Dataset
+from sim_core.identification.calibration import plan
+from sim_core.identification.record import record_from_dataset
+from sim_core.model.spec import load_robot
+from sim_core.rigs import TEMPLATES
+
+OFF = {"valve.rated_flow": 1.2, "supply.pressure": 0.85}
+WIDTH = 0.8          # V, the hidden valve deadband
+
+
+def _diagnose(cli, tmp_path, template, hidden, seed=5):
+    rig = tmp_path / "rig"
+    cli("rig", "new", template, "--out", rig, check=True)
+    spec = load_robot(rig)
+    j = spec.joint_names[0]
+    i = spec.tree.index(spec.joint(j).dof)
+    span = float(spec.tree.upper[i] - spec.tree.lower[i])
+    off = {(k if k.startswith("supply") else f"joints.{j}.{k}"): f for k, f in OFF.items()}
+    rows, _ = closed_loop_record(rig, hidden=hidden, off=off, seed=seed, duration=60.0, start_offset=0.05 * span)
+    write_headerless(rows, tmp_path / "log.csv")
+    cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
+    proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    return j, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+
+
+@pytest.mark.parametrize("template", list(TEMPLATES))
+def test_a_hidden_deadband_is_named_with_its_width(cli, tmp_path, template):
+    j, d = _diagnose(cli, tmp_path, template, ("deadband", {"width": WIDTH}))
+    assert d["closed_loop"] is True
+    assert [(s["effect"], s["joint"]) for s in d["selected"] if s["effect"] == "deadband"] == [("deadband", j)], d["selected"]
+    width = next(s for s in d["selected"] if s["effect"] == "deadband")["params"]["width"]
+    assert width == pytest.approx(WIDTH, rel=0.15)
+    # what else is named is a small sensor correction at most, never another valve or load effect
+    assert {s["effect"] for s in d["selected"]} <= {"deadband", "sensor_offset", "sensor_gain"}, d["selected"]
+
+
+@pytest.mark.parametrize("template", list(TEMPLATES))
+def test_a_clean_record_of_an_off_nominal_rig_is_no_discrepancy(cli, tmp_path, template):
+    _, d = _diagnose(cli, tmp_path, template, None)
+    assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+
+
+def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli):
+    """The rotary template's sensor offset range (B +-0.52 rad) is wider than the sensor_offset
+    effect allows (+-0.5 rad): the calibration searches the intersection instead of failing."""
+    cli("rig", "new", "rotary", "--out", tmp_path / "rig", check=True)
+    spec = load_robot(tmp_path / "rig")
+    j = spec.joint_names[0]
+    lo, hi = spec.estimated[f"joints.{j}.sensor.B"]
+    nominal = spec.get(f"joints.{j}.sensor.B")
+    assert max(hi - nominal, nominal - lo) > 0.5      # the premise
+    rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, off={}, seed=1, duration=5.0)
+    A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
+    ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
+    rec = record_from_dataset(ds, spec, source="log")
+    m = spec.copy()
+    fp = next(f for f in plan(m, rec).free if f.key == f"effects.sensor_offset.{j}.offset")
+    assert -0.5 <= fp.lower < 0.0 < fp.upper <= 0.5
