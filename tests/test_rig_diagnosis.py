@@ -4,7 +4,8 @@ Each template rig is run under a P controller (the rig's own, tests/rig_records.
 operator-like steps; the truth has the valve 20 % larger and the supply 15 % lower than the written
 robot.toml says, starts 5 % of the stroke off the template's initial position, and is logged at
 50 Hz with jittered timestamps, the position in sensor volts and no pressures. Only the headerless
-log reaches the commands under test.
+log reaches the commands under test. A hidden deadband, valve asymmetry or delay is named with its
+parameter within 15 % on every template; a clean record is no_significant_discrepancy.
 """
 
 import json
@@ -20,7 +21,7 @@ from sim_core.model.spec import load_robot
 from sim_core.rigs import TEMPLATES
 
 OFF = {"valve.rated_flow": 1.2, "supply.pressure": 0.85}
-WIDTH = 0.8          # V, the hidden valve deadband
+HIDDEN = {"deadband": ("width", 0.8), "valve_asymmetry": ("ratio", 0.7), "delay": ("delay", 0.06)}
 
 
 def _diagnose(cli, tmp_path, template, hidden, seed=5):
@@ -40,15 +41,15 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5):
     return j, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
 
 
+@pytest.mark.parametrize("effect", list(HIDDEN))
 @pytest.mark.parametrize("template", list(TEMPLATES))
-def test_a_hidden_deadband_is_named_with_its_width(cli, tmp_path, template):
-    j, d = _diagnose(cli, tmp_path, template, ("deadband", {"width": WIDTH}))
-    assert d["closed_loop"] is True
-    assert [(s["effect"], s["joint"]) for s in d["selected"] if s["effect"] == "deadband"] == [("deadband", j)], d["selected"]
-    width = next(s for s in d["selected"] if s["effect"] == "deadband")["params"]["width"]
-    assert width == pytest.approx(WIDTH, rel=0.15)
-    # what else is named is a small sensor correction at most, never another valve or load effect
-    assert {s["effect"] for s in d["selected"]} <= {"deadband", "sensor_offset", "sensor_gain"}, d["selected"]
+def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, template, effect):
+    name, value = HIDDEN[effect]
+    j, d = _diagnose(cli, tmp_path, template, (effect, {name: value}))
+    assert d["closed_loop"] is True and d["verdict"] == "discrepancy"
+    hit = [s for s in d["selected"] if s["effect"] == effect]
+    assert hit and hit[0]["joint"] == j, d["selected"]
+    assert hit[0]["params"][name] == pytest.approx(value, rel=0.15)
 
 
 @pytest.mark.parametrize("template", list(TEMPLATES))

@@ -68,6 +68,7 @@ class OperatorPanel:
         self.history = History(self.joints, [spec.joint(j).dof for j in self.joints],
                                int(PLOT_WINDOW_S * render_rate_hz) + 1)
         self._lock = threading.Lock()
+        self._command_lock = threading.Lock()   # slider read + send, one at a time
         self._touched: dict[str, float] = {}
         self._held: dict[str, float] = {}     # joints this panel commands away from neutral
         self._estop = False
@@ -201,16 +202,20 @@ class OperatorPanel:
                 return
             if self._refuse(ev.client):
                 return
-            v = float(self.sliders[j].value)
-            if self._estop:
-                self._set_slider(j, 0.0)
-                self.notify("E-STOP is engaged: release it before commanding.", client=ev.client)
-                return
-            try:
-                self.link.set_voltages({j: v})
-            except (LinkError, ValueError) as exc:
-                self.notify(str(exc), client=ev.client)
-                return
+            # callbacks run on a thread pool: reading the slider and sending its value happen under one
+            # lock, so the last command sent is the slider's last value (an earlier callback that read
+            # an older value cannot overtake it)
+            with self._command_lock:
+                v = float(self.sliders[j].value)
+                if self._estop:
+                    self._set_slider(j, 0.0)
+                    self.notify("E-STOP is engaged: release it before commanding.", client=ev.client)
+                    return
+                try:
+                    self.link.set_voltages({j: v})
+                except (LinkError, ValueError) as exc:
+                    self.notify(str(exc), client=ev.client)
+                    return
             with self._lock:
                 self._touched[j] = time.monotonic()
                 if v != 0.0:

@@ -194,13 +194,16 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
                          f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
     cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
+    nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
     for c in cal.changes:
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
     # the candidates refit the identified model parameters with themselves (an effect parameter the
     # calibration switched on stays at its calibrated value: the candidate of that effect refits it)
-    keys = [k for k in cal.identified if not k.startswith("effects.")]
+    # (the spec's estimated parameters, effect parameters among them, are nuisances of the rig: they
+    # are refitted with every candidate and not offered as discrepancies of their own)
+    keys = [k for k in cal.identified if not k.startswith("effects.") or k in nuisance]
     # a large effect the nominal model lacks (a wide deadband) can dominate the baseline misfit so that
     # nothing calibrated is identified; once an effect is named the calibration is redone with it in
     # the model, and what it identifies then is refitted with the candidates that follow
@@ -217,7 +220,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if not newly:
             return model
         log(f"recalibration with {ev.candidate.label}: {', '.join(newly)} now identified")
-        keys[:] = [k for k in again.identified if not k.startswith("effects.")]
+        keys[:] = [k for k in again.identified if not k.startswith("effects.") or k in nuisance]
         for k in newly:
             pending.remove(k)
         return again.spec
@@ -236,7 +239,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                                model_deadband=inst[0].params["width"] if inst else 0.0)
         sigs[j] = sig
         guesses[j] = sig["guesses"]
-    cands = bank(base_fast, targets, guesses, effects)
+    cands = [c for c in bank(base_fast, targets, guesses, effects) if not {fp.key for fp in c.free} <= nuisance]
     timings["screening"] = time.perf_counter() - t_start
 
     pnoise = _pressure_noise(rec)

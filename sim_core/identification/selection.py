@@ -85,7 +85,8 @@ def free_list(spec, cand: Candidate | None, accepted: list[tuple[Candidate, dict
     free: list[FreeParameter] = list(cand.free) if cand else []
     for c, _ in accepted:
         free += list(c.free)
-    free += [free_parameter(spec, k, span=CALIBRATION_SPAN) for k in calib_keys]
+    have = {fp.key for fp in free}
+    free += [free_parameter(spec, k, span=CALIBRATION_SPAN) for k in calib_keys if k not in have]
     return free
 
 
