@@ -199,10 +199,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     for c in cal.changes:
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
-    # the candidates refit the identified model parameters with themselves (an effect parameter the
-    # calibration switched on stays at its calibrated value: the candidate of that effect refits it)
-    # (the spec's estimated parameters, effect parameters among them, are nuisances of the rig: they
-    # are refitted with every candidate and not offered as discrepancies of their own)
+    # the candidates refit the identified model parameters with themselves. An effect parameter the
+    # calibration switched on stays at its calibrated value (the candidate of that effect refits it),
+    # except the spec's estimated ones: those are nuisances of the rig, refitted with every candidate
+    # and not offered as discrepancies of their own
     keys = [k for k in cal.identified if not k.startswith("effects.") or k in nuisance]
     # a large effect the nominal model lacks (a wide deadband) can dominate the baseline misfit so that
     # nothing calibrated is identified; once an effect is named the calibration is redone with it in
@@ -224,6 +224,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         for k in newly:
             pending.remove(k)
         return again.spec
+
     loop = detect_closed_loop(rec, spec)
     if loop["closed_loop"]:
         notes.append(loop["note"])
