@@ -1,0 +1,139 @@
+"""How ``hydrohil diagnose`` does on a user's own rig, over more cases than its tests run: every
+``rig new`` template x every hidden effect of the "Your own rig" checks (deadband, valve asymmetry,
+Coulomb friction, leakage, delay) and a clean record, over several seeds.
+
+Each case goes the user's way with the real commands: ``rig new TEMPLATE`` -> a record made in closed
+loop by the tests' generator (``tests/rig_records.py``: P control around the rig with its nominal
+parameters off, valve flow x1.2 and supply pressure x0.85 by default, start 5 % of the stroke off,
+50 Hz, jittered timestamps, headerless CSV of time, sensor volts and command volts, no pressures)
+-> ``hydrohil import`` -> ``hydrohil diagnose``. Printed per case: what was hidden, the verdict,
+what was named, the parameter error and the seconds; then the share of cases right per effect and
+overall (named alone, within 15 %; clean: ``no_significant_discrepancy``), the reference in the same
+run being the clean records' false alarms.
+
+    .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
+        [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,none] [--seeds 1]
+        [--flow 1.2] [--supply 0.85] [--json FILE]
+
+About 25 s per case on this 2-core VM (18 cases per seed with the defaults).
+"""
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
+
+from rig_records import closed_loop_record, write_headerless  # noqa: E402
+
+from sim_core.identification.candidates import actuator_scales  # noqa: E402
+from sim_core.model.spec import load_robot  # noqa: E402
+
+TOLERANCE = 0.15
+
+
+def hidden_params(effect: str, spec, joint: str) -> dict | None:
+    """The hidden effect's parameters, sized to the rig (the checks' magnitudes)."""
+    sc = actuator_scales(spec, joint)
+    return {"deadband": {"width": 0.8}, "valve_asymmetry": {"ratio": 0.7}, "delay": {"delay": 0.06},
+            "coulomb_friction": {"torque": 0.06 * sc["torque"]},
+            "leakage": {"internal": 0.04 * sc["q_full"] / spec.supply["pressure"]}, "none": None}[effect]
+
+
+def cli(*args) -> None:
+    p = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True,
+                       cwd=ROOT)
+    if p.returncode:
+        raise RuntimeError(f"hydrohil {' '.join(map(str, args[:2]))} failed: {p.stderr.strip()[-800:]}")
+
+
+def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float) -> dict:
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    cli("rig", "new", template, "--out", work / "rig")
+    spec = load_robot(work / "rig")
+    joint = spec.joint_names[0]
+    i = spec.tree.index(spec.joint(joint).dof)
+    span = float(spec.tree.upper[i] - spec.tree.lower[i])
+    params = hidden_params(effect, spec, joint)
+    off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
+    rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
+                                 seed=seed, duration=60.0, start_offset=0.05 * span)
+    write_headerless(rows, work / "log.csv")
+    t0 = time.perf_counter()
+    cli("import", work / "log.csv", "--robot", work / "rig", "--out", work / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
+    cli("diagnose", "--robot", work / "rig", work / "rec.csv", "--report", work / "rep", "--quiet")
+    seconds = time.perf_counter() - t0
+    d = json.loads((work / "rep" / "diagnosis.json").read_text())
+    named = [s["effect"] for s in d["selected"]]
+    error = None
+    if params:
+        key = next(iter(params))
+        hit = [s for s in d["selected"] if s["effect"] == effect]
+        if hit:
+            error = hit[0]["params"][key] / params[key] - 1.0
+        right = named == [effect] and error is not None and abs(error) <= TOLERANCE
+    else:
+        right = d["verdict"] == "no_significant_discrepancy"
+    return {"template": template, "effect": effect, "seed": seed, "truth": params, "verdict": d["verdict"],
+            "named": [(s["effect"], s["params"]) for s in d["selected"]], "error": error, "right": right,
+            "fit_before": d["baseline"]["fit"][joint],
+            "fit_after": (d.get("extended") or {}).get("fit", {}).get(joint), "seconds": seconds}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--templates", default="cylinder,boom,rotary")
+    ap.add_argument("--effects", default="deadband,valve_asymmetry,coulomb_friction,leakage,delay,none")
+    ap.add_argument("--seeds", type=int, default=1, help="noise/excitation seeds per case (1..N)")
+    ap.add_argument("--flow", type=float, default=1.2, help="the rig's valve flow against its spec (factor)")
+    ap.add_argument("--supply", type=float, default=0.85, help="the rig's supply pressure against its spec (factor)")
+    ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
+    cases = []
+    for seed in range(1, args.seeds + 1):
+        for template in args.templates.split(","):
+            for effect in args.effects.split(","):
+                try:
+                    c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply)
+                except Exception as exc:  # a case that fails is a finding, not the end of the run
+                    c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
+                cases.append(c)
+                if "failed" in c:
+                    print(f"{template:9s} {effect:17s} seed {seed}: FAILED {c['failed']}", flush=True)
+                    continue
+                err = "" if c["error"] is None else f" error {100 * c['error']:+.1f} %"
+                named = ", ".join(f"{e} {', '.join(f'{k}={v:.4g}' for k, v in p.items())}" for e, p in c["named"]) or "-"
+                after = "" if c["fit_after"] is None else f" -> {c['fit_after']:.1f}"
+                print(f"{template:9s} {effect:17s} seed {seed}: {'RIGHT' if c['right'] else 'wrong'}  {c['verdict']}: "
+                      f"{named}{err}; fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
+    print(f"\nrig off nominal: valve flow x{args.flow:g}, supply x{args.supply:g}; right = named alone within "
+          f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
+    for effect in args.effects.split(","):
+        sel = [c for c in cases if c["effect"] == effect]
+        print(f"  {effect:17s} {sum(c['right'] for c in sel)}/{len(sel)} right")
+    hidden = [c for c in cases if c["effect"] != "none"]
+    clean = [c for c in cases if c["effect"] == "none"]
+    if hidden:
+        print(f"  hidden effects named right: {100 * sum(c['right'] for c in hidden) / len(hidden):.0f} % of {len(hidden)}")
+    if clean:
+        print(f"  clean records with a false alarm: {100 * sum(not c['right'] for c in clean) / len(clean):.0f} % "
+              f"of {len(clean)}")
+    done = [c["seconds"] for c in cases if "seconds" in c]
+    if done:
+        print(f"  diagnose (import included): median {sorted(done)[len(done) // 2]:.0f} s, max {max(done):.0f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps(cases, indent=1))
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
