@@ -172,9 +172,8 @@ def _estimated(spec, rec: Record, key: str, lo: float, hi: float, switched) -> F
         else:
             name, pname, a, b, null = "sensor_offset", "offset", nominal - hi, nominal - lo, 0.0
         # the effect's own bounds hold too (a wide offset range on a rotary sensor can exceed them)
-        from ..effects import EFFECTS
-
-        bound = next(p for p in EFFECTS[name].PARAMETERS if p.name == pname)
+        eff_key = f"effects.{name}.{j}.{pname}"
+        bound = declared(spec, eff_key)
         a, b = max(min(a, b), bound.lower), min(max(a, b), bound.upper)
         if not a < b:
             raise ValueError(f"range [{lo:g}, {hi:g}] leaves no room inside the {name} effect's bounds "
@@ -182,7 +181,7 @@ def _estimated(spec, rec: Record, key: str, lo: float, hi: float, switched) -> F
         if not any(e.name == name and e.joint == j for e in spec.effects):
             spec.enable_effect(name, j, **{pname: null})
             switched.append((name, j))
-        return FreeParameter(f"effects.{name}.{j}.{pname}", a, b, null=null)
+        return FreeParameter(eff_key, a, b, null=null)
     if parts[0] == "effects":
         declared(spec, key)
         name, joint = parts[1], (parts[2] if len(parts) == 4 else None)

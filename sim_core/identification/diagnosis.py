@@ -203,7 +203,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # calibration switched on stays at its calibrated value (the candidate of that effect refits it),
     # except the spec's estimated ones: those are nuisances of the rig, refitted with every candidate
     # and not offered as discrepancies of their own
-    keys = [k for k in cal.identified if not k.startswith("effects.") or k in nuisance]
+    def refit_keys(identified):
+        return [k for k in identified if not k.startswith("effects.") or k in nuisance]
+
+    keys = refit_keys(cal.identified)
     # a large effect the nominal model lacks (a wide deadband) can dominate the baseline misfit so that
     # nothing calibrated is identified; once an effect is named the calibration is redone with it in
     # the model, and what it identifies then is refitted with the candidates that follow
@@ -220,7 +223,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if not newly:
             return model
         log(f"recalibration with {ev.candidate.label}: {', '.join(newly)} now identified")
-        keys[:] = [k for k in again.identified if not k.startswith("effects.") or k in nuisance]
+        keys[:] = refit_keys(again.identified)
         for k in newly:
             pending.remove(k)
         return again.spec
