@@ -178,8 +178,7 @@ def test_estop_in_the_page_neutralises_every_valve(hydrolek):
     m.page.get_by_role("button", name="E-STOP", exact=True).click()
     wait_for(lambda: svc.commands.estopped, 15, "the E-STOP to engage")
     try:
-        st = svc.documents.state()
-        assert st["estop"]
+        wait_for(lambda: svc.documents.state()["estop"], 5, "the engine to apply the E-STOP")
         wait_for(lambda: all(js["command_voltage"] == 0.0 and js["requested_voltage"] == 0.0
                              for js in svc.documents.state()["joints"].values()), 5, "every valve at 0 V")
         wait_for(lambda: all(abs(js["spool"]) < 1e-3 for js in svc.documents.state()["joints"].values()), 5,

@@ -99,8 +99,14 @@ def test_remote_link_commands_token_estop_and_connection_state(tmp_path):
                      "the remote command")
             c.put("/api/v1/commands", json={"voltages": {"j4": 2.0}}, headers=srv.headers()).raise_for_status()
             ok.set_estop(True)
-            st = c.get("/api/v1/state").json()
-            assert st["estop"] and all(js["requested_voltage"] == 0.0 for js in st["joints"].values())
+            # the latch is set when the call returns; the state document is the engine's, from its next tick
+            assert c.get("/api/v1/estop").json()["engaged"]
+
+            def stopped():
+                st = c.get("/api/v1/state").json()
+                return st["estop"] and all(js["requested_voltage"] == 0.0 for js in st["joints"].values())
+
+            wait_for(stopped, 5, "the engine to apply the E-STOP")
             wait_for(lambda: all(js["command_voltage"] == 0.0
                                  for js in c.get("/api/v1/state").json()["joints"].values()),
                      5, "every valve neutral")
