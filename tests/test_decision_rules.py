@@ -3,7 +3,7 @@
 Each test sets up scores on both sides of one rule, so deleting or inverting the rule fails it:
 acceptance (gain threshold, noise spread, BIC, search bound, 3-sigma identifiability), forward
 selection (best passing wins; a masked effect is re-evaluated next round; stop at the noise
-ceiling), backward pass, final check, ambiguity and ``decided_by``, the verdict with its residual
+ceiling), the masked-pair search, backward pass, final check, ambiguity and ``decided_by``, the verdict with its residual
 evidence, and the readable gain scale.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sim_core.identification import decision as dc
-from sim_core.identification.candidates import DEFAULT_DECIDER, SAME_EFFECT, Candidate, decider
+from sim_core.identification.candidates import DEFAULT_DECIDER, SAME_EFFECT, Candidate, Pair, decider
 from sim_core.identification.parameters import FreeParameter
 from sim_core.identification.residual_evidence import dominant_band, joint_evidence, locate, residual_fails, worst_channel
 
@@ -180,6 +180,89 @@ def test_forward_stops_at_max_effects():
     assert len(fw.accepted) == 2 and fw.stopped == "reached 2 effects"
 
 
+# ---- masked pairs ------------------------------------------------------------------------------------
+def scored_pair(a, b, **kw):
+    return scored(Pair((a, b)), **kw)
+
+
+def test_pairs_are_ranked_by_the_sum_of_single_gains_without_duplicates_or_diverged_fits():
+    D = cand("delay", "j3")
+    evs = [scored(A, gain=1.0), scored(B, gain=-0.5), scored(C, gain=1.5), scored(D, gain=-math.inf),
+           scored(cand("deadband"), gain=0.9)]          # the deadband on j2 again: no pair with itself
+    pairs = dc.rank_pairs(evs)
+    labels = [(a.candidate.label, b.candidate.label) for a, b in pairs]
+    assert labels[0] == (A.label, C.label)               # 2.5
+    assert [round(a.gain + b.gain, 2) for a, b in pairs] == sorted((round(a.gain + b.gain, 2) for a, b in pairs),
+                                                                   reverse=True)
+    assert all(a.key != b.key for a, b in pairs) and all(D.label not in lbl for lbl in labels)
+    many = [scored(cand("deadband", f"j{i}"), gain=float(i)) for i in range(10)]
+    assert len(dc.rank_pairs(many)) == dc.MAX_PAIRS == 15 and len(dc.rank_pairs(many, 3)) == 3
+    top = dc.rank_pairs(many, 1)[0]
+    assert {top[0].candidate.joint, top[1].candidate.joint} == {"j9", "j8"}
+
+
+def test_a_pair_passes_only_when_each_member_is_identified():
+    both = judged(scored_pair(A, C))
+    assert both.accepted_ok, both.reasons
+    # the delay's parameter within 3 sigma of no effect: the deadband alone carries the significance
+    one = scored_pair(A, C, values={A.free[0].key: 1.0, C.free[0].key: 0.2})
+    judged(one)
+    assert not one.accepted_ok and any(r.startswith(C.label) and "3 sigma" in r for r in one.reasons)
+    # a member on a far search bound fails as a single would
+    far = judged(scored_pair(A, C), {C.free[0].key: "upper"})
+    assert any("upper search bound" in r for r in far.reasons)
+
+
+def pair_forward(single_gains, pair_gains, misfit=True, score=0.0, max_effects=3):
+    """forward() where no single passes (or does, per ``single_gains``) and pairs score ``pair_gains``."""
+    asked = []
+
+    def evaluate_round(pool, model, accepted, r):
+        return [judged(scored(c, gain=single_gains.get((frozenset(model), c.label), 0.5))) for c in pool]
+
+    def evaluate_pairs(pairs, model, accepted, r):
+        asked.append([(a.candidate.label, b.candidate.label) for a, b in pairs])
+        return [judged(scored_pair(a.candidate, b.candidate, gain=pair_gains.get(
+            frozenset({a.candidate.label, b.candidate.label}), 0.5))) for a, b in pairs]
+
+    fw = dc.forward([A, B, C], frozenset(), evaluate_round=evaluate_round,
+                    extend=lambda m, ev: m | {c.label for c in getattr(ev.candidate, "members", [ev.candidate])},
+                    score=lambda m: score, ceiling=100.0, max_effects=max_effects,
+                    evaluate_pairs=evaluate_pairs, misfit=lambda m: misfit)
+    return fw, asked
+
+
+def test_a_masked_pair_is_named_together_when_no_single_passes_and_the_residual_fails():
+    fw, asked = pair_forward({}, {frozenset({A.label, C.label}): 6.0})
+    assert len(asked) == 1 and len(asked[0]) == 3       # every pair of the three singles
+    assert [e.candidate.label for e in fw.accepted] == [A.label, C.label]
+    pair = fw.accepted[0].pair
+    assert pair is not None and fw.accepted[1].pair is pair and pair.gain == 6.0
+    assert all(e.gain == 6.0 and e.round == 1 for e in fw.accepted)
+    assert fw.model == {A.label, C.label} and len(fw.pairs) == 1
+    # the remaining single is tried again with the pair in the model (round 2), then the search stops
+    assert len(fw.rounds) == 2 and [e.candidate.label for e in fw.rounds[1]] == [B.label]
+
+
+def test_no_pair_search_when_the_residual_is_white_a_single_passes_or_the_score_is_at_its_ceiling():
+    good = {frozenset({A.label, C.label}): 6.0}
+    fw, asked = pair_forward({}, good, misfit=False)
+    assert asked == [] and fw.accepted == [] and fw.stopped == "no candidate passed"
+    fw, asked = pair_forward({}, good, score=99.0)
+    assert asked == [] and fw.accepted == []
+    fw, asked = pair_forward({(frozenset(), B.label): 5.0}, good)
+    assert [e.candidate.label for e in fw.accepted][0] == B.label and all(e.pair is None for e in fw.accepted[:1])
+    # two effects already in, at most three: a pair would exceed it
+    fw, asked = pair_forward({}, good, max_effects=1)
+    assert asked == [] and fw.accepted == []
+
+
+def test_no_pair_passing_names_nothing_and_says_how_many_were_tried():
+    fw, asked = pair_forward({}, {frozenset({A.label, C.label}): 1.5})
+    assert fw.accepted == [] and fw.stopped == "no candidate passed, alone or in 3 pairs"
+    assert len(fw.pairs) == 1 and not any(e.accepted_ok for e in fw.pairs[0])
+
+
 # ---- backward pass and final check ----------------------------------------------------------------
 def test_backward_drops_a_stand_in_and_rescores_after_each_drop():
     evs = [scored(A), scored(B), scored(C)]
@@ -207,6 +290,41 @@ def test_backward_keeps_effects_worth_the_threshold():
     evs = [scored(A), scored(B)]
     model, kept = dc.backward(evs, "AB", 90.0, lambda m, ev, rest: ("x", 87.9))
     assert kept == evs and model == "AB"
+
+
+def test_backward_removes_a_pair_named_together_as_a_unit():
+    pair = judged(scored_pair(A, C))
+    members = dc.member_evaluations(pair)
+    single = scored(B)
+    asked = []
+
+    def refit_without(model, ev, rest):
+        asked.append((ev.candidate.label, [e.candidate.label for e in rest]))
+        left = frozenset(e.candidate.label for e in rest)
+        return "less", {frozenset({B.label}): keep_b, frozenset({A.label, C.label}): 85.0, frozenset(): 80.0}[left]
+
+    keep_b = 87.0                            # removing the pair costs 3 points: kept
+    model, kept = dc.backward([single] + members, "all", 90.0, refit_without)
+    assert asked == [(pair.candidate.label, [B.label]), (B.label, [A.label, C.label])]
+    assert kept == [single] + members and model == "all"
+    asked.clear()
+    keep_b = 89.5                            # 0.5 points: both members go, with one refit
+    model, kept = dc.backward([single] + members, "all", 90.0, refit_without)
+    assert kept == [single] and len(asked) == 2
+    assert all(any("removing the pair" in r for r in m.reasons) for m in members)
+
+
+def test_final_check_drops_both_members_of_a_pair_together():
+    members = dc.member_evaluations(judged(scored_pair(A, C)))
+    single = scored(B)
+    removed = []
+    fits = iter(["fit1", "fit2"])
+    chosen, fit = dc.final_check([single] + members, "m", refit=lambda m, ch: next(fits),
+                                 worth=lambda f, ch: [5.0, 1.0, 3.0] if f == "fit1" else [5.0],
+                                 remove=lambda f, ev: removed.append(ev.candidate.label) or "less")
+    assert chosen == [single] and fit == "fit2"
+    assert removed == [members[0].pair.candidate.label]
+    assert any("final check with" in r for r in members[1].reasons)
 
 
 def test_final_check_drops_the_weakest_effect_under_the_threshold_and_refits():

@@ -57,10 +57,18 @@ def test_an_unmodelled_8_hz_mode_is_unexplained_with_its_band(cli, tmp_path):
     assert ev["channel"] == "velocity" and ev["tests_fail"]
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "Unexplained discrepancy" in html and "dominant band" in html
+    # no single candidate passed and the residual is not white: pairs were fitted jointly, and none
+    # of them is named for a mode the bank has no effect for
+    pairs = d["pairs"]
+    assert 1 <= len(pairs) <= 15 and "pairs" in d["decision"]["stopped"]
+    for p in pairs:
+        assert len(p["members"]) == 2 and not p["accepted"] and p["rejected_because"]
+        assert set(p["alone"]) == {f"{m['effect']}@{m['joint']}" for m in p["members"]}
 
 
 def test_the_same_record_without_the_mode_has_nothing_to_explain(cli, tmp_path):
     d = _diagnose(cli, _record(cli, tmp_path, SEED), tmp_path / "rep")
     assert d["verdict"] == "no_significant_discrepancy", d["unexplained"]
     assert d["unexplained"] == {}
+    assert d["pairs"] == []             # a white residual: no pair search
     assert d["decision"]["score_ceiling"] - max(d["extended"]["score"].values()) < d["decision"]["far_points"]

@@ -85,6 +85,46 @@ class Candidate:
         return s
 
 
+@dataclass
+class Pair:
+    """Two candidates fitted together (a masked pair): each alone can be absorbed by the calibration
+    or cancel the other's sign in the record, so neither passes on its own. Behaves as a Candidate
+    whose free parameters are both members' (first's, then second's); ``grid`` holds starting points
+    in that order; ``alone`` keeps each member's single-candidate verdict for the report."""
+
+    members: tuple[Candidate, Candidate]
+    grid: list[list[float]] = field(default_factory=list)
+    alone: dict[str, dict] = field(default_factory=dict)     # label -> {"gain": points, "rejected_because": [...]}
+    existing: bool = False
+    fixed: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def effect(self) -> str:
+        return "+".join(m.effect for m in self.members)
+
+    @property
+    def joint(self) -> str | None:
+        joints = {m.joint for m in self.members}
+        return joints.pop() if len(joints) == 1 else None
+
+    @property
+    def free(self) -> list[FreeParameter]:
+        return [fp for m in self.members for fp in m.free]
+
+    @property
+    def label(self) -> str:
+        return " + ".join(m.label for m in self.members)
+
+    @property
+    def param_names(self) -> list[str]:
+        return [fp.key.split(".")[-1] for fp in self.free]
+
+    def prepare(self, spec):
+        for m in self.members:
+            spec = m.prepare(spec)
+        return spec
+
+
 def _fp(name, joint, pname, lo, hi, log, null, unit=""):
     return FreeParameter(effect_key(name, joint, pname), float(lo), float(hi), log=log, null=null, unit=unit)
 

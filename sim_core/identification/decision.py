@@ -13,8 +13,12 @@ The rules, in the order they apply:
 * forward selection (:func:`forward`): each round every remaining candidate is refitted with what
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
   when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
+* masked pairs (:func:`rank_pairs`, :func:`forward`): when no single candidate passes but the model's
+  residual tests fail, the most promising pairs (by the sum of their single gains, at most 15) are
+  fitted jointly; a pair that passes (each member identified) joins as two effects named together;
 * backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
-  less than 2 points is dropped (an early pick can stand in for effects named later);
+  less than 2 points is dropped (an early pick can stand in for effects named later); a pair named
+  together is removed together (each alone is absorbed by the refit, by definition);
 * final check (:func:`final_check`): in the refitted final model each named effect must still be
   worth 2 points, else the weakest is dropped and the rest refitted;
 * ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
@@ -38,6 +42,7 @@ NOISE_FACTOR = 3.0          # ... or 3 x the noise spread of the gain, when larg
 SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
 AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
 MAX_EFFECTS = 3
+MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
 
 NAMED = "discrepancy"
@@ -66,6 +71,7 @@ class Evaluation:
     round: int = 1
     outputs: Any = None
     base_score: float = math.nan              # the model it is compared with, on the same joints
+    pair: Evaluation | None = None            # a member of a pair named together: the pair's evaluation
 
     @property
     def accepted_ok(self) -> bool:
@@ -133,6 +139,10 @@ def judge(ev: Evaluation, at_bound: dict[str, str]) -> None:
             significant += 1
     if not significant and not any("search bound" in r for r in ev.reasons):
         ev.reasons.append(f"no parameter differs from 'no effect' by {SIGNIFICANCE:g} sigma")
+    elif significant:
+        for m in getattr(ev.candidate, "members", ()):     # a pair: each member must be identified
+            if not any(ev.significance[fp.key] > SIGNIFICANCE and fp.key not in ev.bounds for fp in m.free):
+                ev.reasons.append(f"{m.label}: no parameter differs from 'no effect' by {SIGNIFICANCE:g} sigma")
     if not math.isfinite(ev.gain):
         ev.reasons.append("the fitted model cannot be simulated on the validation data (the state diverged)")
         return
@@ -161,19 +171,51 @@ class Forward:
     rounds: list[list[Evaluation]]
     model: Any
     stopped: str
+    pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
+
+
+def rank_pairs(evals: list[Evaluation], max_pairs: int = MAX_PAIRS) -> list[tuple[Evaluation, Evaluation]]:
+    """The pairs of a round's single candidates worth fitting jointly, most promising first: by the sum
+    of their single gains (a masked effect still moves the fit a little; one absorbed by the
+    calibration gains about nothing, one cancelled by its partner may lose). Two candidates of the
+    same effect and joint, or one whose fit diverged, make no pair. At most ``max_pairs``."""
+    ok = [e for e in evals if math.isfinite(e.gain)]
+    pairs = [(a, b) for i, a in enumerate(ok) for b in ok[i + 1:] if a.key != b.key]
+    pairs.sort(key=lambda p: -(p[0].gain + p[1].gain))
+    return pairs[:max_pairs]
+
+
+def member_evaluations(pair_ev: Evaluation) -> list[Evaluation]:
+    """A pair that passed, as one Evaluation per member (its own candidate, the pair's fit and gain)."""
+    out = []
+    for m in pair_ev.candidate.members:
+        keys = {fp.key for fp in m.free}
+        out.append(Evaluation(m, dict(pair_ev.values), dict(pair_ev.sigma), dict(pair_ev.ci95), pair_ev.cost,
+                              pair_ev.fits, gain=pair_ev.gain, gain_channels=dict(pair_ev.gain_channels),
+                              spread=pair_ev.spread, bic_delta=pair_ev.bic_delta,
+                              significance={k: v for k, v in pair_ev.significance.items() if k in keys},
+                              bounds={k: v for k, v in pair_ev.bounds.items() if k in keys}, sims=pair_ev.sims,
+                              round=pair_ev.round, outputs=pair_ev.outputs, base_score=pair_ev.base_score,
+                              pair=pair_ev))
+    return out
 
 
 def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: Callable, score: Callable,
-            ceiling: float, max_effects: int = MAX_EFFECTS, log=None) -> Forward:
-    """Greedy forward selection.
+            ceiling: float, max_effects: int = MAX_EFFECTS, log=None, evaluate_pairs: Callable | None = None,
+            misfit: Callable | None = None) -> Forward:
+    """Greedy forward selection, with the masked-pair search.
 
     ``evaluate_round(pool, model, accepted, round)`` fits and judges every candidate of ``pool`` on
     ``model`` (``accepted``: [(candidate, params)] already in it) and returns their Evaluations;
-    ``extend(model, ev)`` is ``model`` with ``ev``'s candidate at its fitted values; ``score(model)``
-    its validation score."""
+    ``extend(model, ev)`` is ``model`` with ``ev``'s candidate (a single or a pair) at its fitted
+    values; ``score(model)`` its validation score. ``evaluate_pairs(pairs, model, accepted, round)``
+    (pairs: :func:`rank_pairs`) fits and judges pairs jointly; it is called when no single candidate
+    of a round passes, the model is not near its noise ceiling and ``misfit(model)`` (its residual
+    tests fail) holds. None: no pair search."""
     log = log or (lambda msg: None)
     accepted: list[Evaluation] = []
     rounds: list[list[Evaluation]] = []
+    pairs_tried: list[list[Evaluation]] = []
     pool = list(cands)
     stopped = "no candidate passed"
     for r in range(1, max_effects + 1):
@@ -185,38 +227,64 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         if not pool:
             stopped = "no candidates left"
             break
-        evals = evaluate_round(pool, model, [(e.candidate, e.effect_params()) for e in accepted], r)
+        have = [(e.candidate, e.effect_params()) for e in accepted]
+        evals = evaluate_round(pool, model, have, r)
         rounds.append(evals)
         best = best_passing(evals)
         if best is None:
             stopped = "no candidate passed" if r == 1 else "no further candidate passed"
-            break
-        log(f"round {r}: accepted {best.candidate.label} ({best.gain:+.2f} points)")
-        accepted.append(best)
+            if (evaluate_pairs is None or len(accepted) + 2 > max_effects or near_ceiling(score(model), ceiling)
+                    or (misfit is not None and not misfit(model))):
+                break
+            pairs = rank_pairs(evals)
+            if not pairs:
+                break
+            pevals = evaluate_pairs(pairs, model, have, r)
+            pairs_tried.append(pevals)
+            best = best_passing(pevals)
+            if best is None:
+                stopped += f", alone or in {len(pevals)} pair{'s' if len(pevals) != 1 else ''}"
+                break
+            log(f"round {r}: accepted the pair {best.candidate.label} ({best.gain:+.2f} points; neither passes alone)")
+            accepted.extend(member_evaluations(best))
+        else:
+            log(f"round {r}: accepted {best.candidate.label} ({best.gain:+.2f} points)")
+            accepted.append(best)
         model = extend(model, best)
         done = {e.key for e in accepted}
         # a large effect masks the others: every remaining candidate gets another chance
         pool = [c for c in cands if (c.effect, c.joint) not in done]
+        if len(accepted) >= max_effects:
+            stopped = f"reached {max_effects} effects"
+            break
     else:
         stopped = f"reached {max_effects} effects"
-    return Forward(accepted, rounds, model, stopped)
+    return Forward(accepted, rounds, model, stopped, pairs_tried)
 
 
 # ---- backward pass and final check ----------------------------------------------------------------------
 def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None):
     """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
     an early pick can be a stand-in for effects named later. ``full``: the score of ``model``;
-    ``refit_without(model, ev, rest)`` -> (model without ``ev``, the rest refitted; its score).
-    Returns (model, accepted)."""
+    ``refit_without(model, ev, rest)`` -> (model without ``ev``, the rest refitted; its score); for the
+    members of a pair named together ``ev`` is the pair's evaluation. Returns (model, accepted)."""
     log = log or (lambda msg: None)
-    for i in reversed(range(len(accepted))):
-        ev = accepted[i]
-        rest = accepted[:i] + accepted[i + 1:]
-        minus, s = refit_without(model, ev, rest)
+    units: list[list[Evaluation]] = []          # a pair named together goes as a unit
+    for ev in accepted:
+        if ev.pair is not None and units and units[-1][0].pair is ev.pair:
+            units[-1].append(ev)
+        else:
+            units.append([ev])
+    for unit in reversed(units):
+        rest = [e for e in accepted if not any(e is u for u in unit)]
+        what = unit[0].pair or unit[0]          # ``refit_without`` gets the pair's evaluation for a pair
+        minus, s = refit_without(model, what, rest)
         drop = full - s
         if drop < THRESHOLD_POINTS:
-            log(f"backward: dropped {ev.candidate.label} (removing it costs {drop:.2f} points)")
-            ev.reasons.append(f"dropped in the backward pass: removing it costs only {drop:.2f} points")
+            log(f"backward: dropped {what.candidate.label} (removing it costs {drop:.2f} points)")
+            for u in unit:
+                u.reasons.append(f"dropped in the backward pass: removing {'the pair' if len(unit) > 1 else 'it'} "
+                                 f"costs only {drop:.2f} points")
             model, accepted, full = minus, rest, s
     return model, accepted
 
@@ -226,7 +294,7 @@ def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Call
 
     ``refit(model, chosen)`` -> a fit (opaque); ``worth(fit, chosen)`` -> points each effect is worth
     in it (the score with it minus without it); ``remove(fit, ev)`` -> the fitted model without
-    ``ev``. The weakest effect under the threshold is dropped and the rest refitted, until all pass.
+    ``ev`` (for a member of a pair, ``ev`` is the pair's evaluation: both go). The weakest effect under the threshold is dropped and the rest refitted, until all pass.
     Returns (chosen, the last fit or None when nothing is left)."""
     log = log or (lambda msg: None)
     chosen = list(chosen)
@@ -240,7 +308,11 @@ def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Call
         ev = chosen.pop(k)
         ev.reasons.append(f"dropped in the final check: removing it from the refitted model costs only {w[k]:.2f} points")
         log(f"final check: dropped {ev.candidate.label} ({w[k]:.2f} points)")
-        model, fit = remove(fit, ev), None
+        if ev.pair is not None:     # a pair was identified together: its other member goes with it
+            for other in [e for e in chosen if e.pair is ev.pair]:
+                chosen.remove(other)
+                other.reasons.append(f"dropped in the final check with {ev.candidate.label}, named together with it")
+        model, fit = remove(fit, ev.pair or ev), None
     return chosen, fit
 
 

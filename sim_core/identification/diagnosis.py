@@ -9,7 +9,8 @@ The procedure (research note 'discrepancy catalog' §4):
    record was taken in closed loop (closed_loop.py);
 3. screening: signature statistics give initial guesses and the report's evidence (signatures.py);
 4. decision: fit every candidate, accept by validation gain, BIC and identifiability, greedily for
-   several effects (selection.py); refit the result with the default integrator settings;
+   several effects (selection.py); when no single one passes but the residual tests fail, the most
+   promising pairs are fitted jointly (masked pairs); refit the result with the default integrator settings;
 5. the verdict (decision.py): "discrepancy" with the named effects; "no_significant_discrepancy", the
    null outcome, an answer like any other; "unexplained_discrepancy" when the final model still misses
    the record by far (an angle fit below zero, or far below the noise ceiling with failing residual
@@ -67,6 +68,7 @@ class Diagnosis:
     timings: dict = field(default_factory=dict)
     closed_loop: dict = field(default_factory=dict)   # closed_loop.detect's answer
     unexplained: dict = field(default_factory=dict)   # why and where the record is left unexplained
+    pairs: list[dict] = field(default_factory=list)   # the masked-pair fits, when a pair search ran
 
     @property
     def verdict(self) -> str:
@@ -88,6 +90,7 @@ class Diagnosis:
                          "channels": self.extended_fits},
             "selected": self.selected,
             "candidates": self.candidates,
+            "pairs": self.pairs,
             "decision": {
                 "gain": "validation gain of the joint's score: mean NRMSE fit (percent) of angle, velocity and, "
                         "when recorded, chamber pressures",
@@ -255,8 +258,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         noise = {j: check.noise[j] for j in targets}
     st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures))
+    # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
-                 recalibrate=recalibrate)
+                 recalibrate=recalibrate,
+                 misfit=lambda out: any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values()))
     timings["selection"] = time.perf_counter() - t_start
 
     # final refit of the chosen model with the default integrator settings (two Gauss-Newton steps from
@@ -300,7 +305,14 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
                 "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
                 "refit_of_nominal": c.existing, "round": ev.round}
-        item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures))
+        if ev.pair is None:
+            item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures))
+        else:
+            partner = next(m for m in ev.pair.candidate.members if m is not c)
+            item["named_together_with"] = {"effect": partner.effect, "joint": partner.joint}
+            item["alone"] = ev.pair.candidate.alone.get(c.label, {})
+            tried = next((pe for pe in sel.pairs if any(p is ev.pair for p in pe)), [ev.pair])
+            item.update(rivalry(ev.pair, tried, rec.has_pressures))
         selected.append(item)
 
     candidates = []
@@ -313,6 +325,20 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "round": r, "accepted": ev in sel.accepted, "rejected_because": ev.reasons,
                 "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
                 "noise_spread": round(ev.spread, 4), "simulations": ev.sims,
+            })
+
+    pairs = []
+    for evals in sel.pairs:
+        for pe in sorted(evals, key=lambda e: -e.gain):
+            pairs.append({
+                "members": [{"effect": m.effect, "joint": m.joint} for m in pe.candidate.members],
+                "gain": round(pe.gain, 3), "residual_explained_pct": _pct(pe.explained_pct),
+                "bic_delta": _num(pe.bic_delta),
+                "params": {m.label: {fp.key.split(".")[-1]: _num(pe.values[fp.key]) for fp in m.free}
+                           for m in pe.candidate.members},
+                "alone": pe.candidate.alone, "round": pe.round,
+                "accepted": any(e.pair is pe for e in sel.accepted), "rejected_because": pe.reasons,
+                "noise_spread": round(pe.spread, 4), "simulations": pe.sims,
             })
 
     calib = {"free": pl.keys, "values": {c["parameter"]: c["value"] for c in cal.changes},
@@ -329,7 +355,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # candidates, the model is not extended
         for ev in sel.accepted:
             ev.reasons.append("not named: the extended model still leaves the record unexplained")
-        for item in candidates:
+        for item in candidates + pairs:
             item["accepted"] = False
         selected, sel.accepted = [], []
         ext_acc, ext_out, ext_fits = base_acc, base_out, base_fits
@@ -337,7 +363,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
-                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained)
+                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs)
 
 
 def _score(fits: dict, joints: list[str]) -> float:

@@ -210,6 +210,12 @@ def html_report(d: Diagnosis, data: dict) -> str:
         gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
         parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b>{_share(s)} ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
                      f"BIC change {_fmt(s['bic_delta'])}." + (" Refit of an effect the nominal model already has." if s["refit_of_nominal"] else "") + "</p>")
+        if "named_together_with" in s:
+            o, alone = s["named_together_with"], s.get("alone", {})
+            parts.append(f"<p><b>Named together with {e(o['effect'])}{' on ' + e(o['joint']) if o['joint'] else ''}</b>: "
+                         f"neither passes alone (alone: {alone.get('gain', float('nan')):+.2f} points; "
+                         f"{e('; '.join(alone.get('rejected_because', [])) or 'not accepted')}); each alone is absorbed "
+                         "by the calibration or masked by the other. The gain is the pair's.</p>")
         if "runner_up" in s:
             ru = s["runner_up"]
             parts.append(f"<p>Runner-up: {e(ru['effect'])}{' on ' + e(ru['joint']) if ru['joint'] else ''} "
@@ -417,6 +423,10 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
             lo, hi = s["ci95"][k]
             lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
         lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
+        if "named_together_with" in s:
+            o = s["named_together_with"]
+            lines.append(f"- named together with {o['effect']}" + (f" on {o['joint']}" if o["joint"] else "")
+                         + f": neither passes alone (alone {s.get('alone', {}).get('gain', float('nan')):+.2f} points)")
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
         lines.append("")

@@ -27,21 +27,22 @@ import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import output_error as oe
-from .candidates import Candidate
-from .decision import (AMBIGUITY, MAX_EFFECTS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation, backward as
-                       _backward, forward, judge)
+from .candidates import Candidate, Pair
+from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
+                       backward as _backward, forward, judge)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .record import Record
 from .simulation import Outputs, Runner
 
-__all__ = ["AMBIGUITY", "MAX_EFFECTS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
-           "Setting", "evaluate", "select", "without", "model_with", "free_list", "affected_joints"]
+__all__ = ["AMBIGUITY", "MAX_EFFECTS", "MAX_PAIRS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
+           "Setting", "evaluate", "select", "without", "model_with", "free_list", "affected_joints",
+           "pair_candidate"]
 
 NOISE_DRAWS = 16
 UNCERTAINTY_SHARE = 0.5     # candidates below this share of the threshold skip the uncertainty step
@@ -91,6 +92,9 @@ def free_list(spec, cand: Candidate | None, accepted: list[tuple[Candidate, dict
 
 
 def affected_joints(cand: Candidate, targets: list[str]) -> list[str]:
+    members = getattr(cand, "members", None)
+    if members is not None and all(m.joint in targets for m in members):
+        return list(dict.fromkeys(m.joint for m in members))
     return [cand.joint] if cand.joint in targets else list(targets)
 
 
@@ -275,6 +279,18 @@ def _progress(total: int, desc: str, enabled: bool):
     return tqdm(total=total, desc=desc, unit="fit", disable=not enabled, file=sys.stderr, leave=False)
 
 
+# ---- masked pairs ----------------------------------------------------------------------------------
+def pair_candidate(a: Evaluation, b: Evaluation) -> Pair:
+    """Two single evaluations as a Pair to fit jointly. Starting points: both at their single fits,
+    then each member's own grid with the other at its single fit (a member absorbed alone sits near
+    "no effect", its partner's grid finds where the two separate)."""
+    va = [a.values[fp.key] for fp in a.candidate.free]
+    vb = [b.values[fp.key] for fp in b.candidate.free]
+    grid = [va + vb] + [list(g) + vb for g in a.candidate.grid] + [va + list(g) for g in b.candidate.grid]
+    alone = {e.candidate.label: {"gain": round(e.gain, 3), "rejected_because": list(e.reasons)} for e in (a, b)}
+    return Pair((a.candidate, b.candidate), grid, alone)
+
+
 # ---- greedy forward selection ---------------------------------------------------------------------
 @dataclass
 class Selection:
@@ -284,14 +300,17 @@ class Selection:
     values: dict[str, float]
     stopped: str
     ceiling: float
+    pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
-           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None) -> Selection:
-    """Greedy forward selection and the backward pass (decision.forward, decision.backward) with the
-    simulator-based steps: a round of candidate fits, the validation score, a refit without one effect.
-    ``recalibrate(model, ev)``: the model once ``ev``'s effect is in it, its calibration redone (it
-    may change ``st.calib_keys`` in place); None: the model as extended."""
+           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None) -> Selection:
+    """Greedy forward selection, the masked-pair search and the backward pass (decision.forward,
+    decision.backward) with the simulator-based steps: a round of candidate fits, pair fits, the
+    validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
+    effect is in it, its calibration redone (it may change ``st.calib_keys`` in place); None: the
+    model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
+    condition for the pair search); None: no pair search."""
     log = log or (lambda msg: None)
     ceiling = score_ceiling(st, st.val.joints)
     base = _Baseline(st)
@@ -301,9 +320,15 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         return evaluate_all(st, pool, model, accepted, base_out, base_cost, r, workers=workers, progress=progress,
                             backend=backend)
 
+    def evaluate_pairs(pairs, model, accepted, r):
+        log(f"round {r}: no single candidate passed; fitting {len(pairs)} pairs jointly")
+        return evaluate_round([pair_candidate(a, b) for a, b in pairs], model, accepted, r)
+
     fw = forward(cands, base_spec, evaluate_round=evaluate_round,
                  extend=lambda model, ev: _extend(model, ev, recalibrate),
-                 score=base.score, ceiling=ceiling, max_effects=max_effects, log=log)
+                 score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
+                 evaluate_pairs=None if misfit is None else evaluate_pairs,
+                 misfit=None if misfit is None else (lambda model: misfit(base.outputs(model))))
     model, accepted = fw.model, fw.accepted
     if len(accepted) >= 2:
         def refit_without(model, ev, rest):
@@ -316,7 +341,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    return Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling)
+    return Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs)
 
 
 def _extend(model, ev: Evaluation, recalibrate):
@@ -347,7 +372,12 @@ class _Baseline:
 
 
 def without(base_spec, model, cand: Candidate):
-    """``model`` without ``cand``: switched off, or back to the nominal values if the base had it."""
+    """``model`` without ``cand`` (a single or a pair): switched off, or back to the nominal values if
+    the base had it."""
+    if isinstance(cand, Pair):
+        for m in cand.members:
+            model = without(base_spec, model, m)
+        return model
     s = model.copy()
     nominal = [e for e in base_spec.effects if e.name == cand.effect and e.joint == cand.joint]
     if nominal:
