@@ -311,7 +311,7 @@ def test_backward_removes_a_pair_named_together_as_a_unit():
     keep_b = 89.5                            # 0.5 points: both members go, with one refit
     model, kept = dc.backward([single] + members, "all", 90.0, refit_without)
     assert kept == [single] and len(asked) == 2
-    assert all(any("removing the pair" in r for r in m.reasons) for m in members)
+    assert all(any("removing the pair" in r for r in m.reasons) for m in members + [pair])
 
 
 def test_final_check_drops_both_members_of_a_pair_together():
@@ -325,6 +325,7 @@ def test_final_check_drops_both_members_of_a_pair_together():
     assert chosen == [single] and fit == "fit2"
     assert removed == [members[0].pair.candidate.label]
     assert any("final check with" in r for r in members[1].reasons)
+    assert any("final check" in r for r in members[0].pair.reasons)     # the report's pair row says why
 
 
 def test_final_check_drops_the_weakest_effect_under_the_threshold_and_refits():

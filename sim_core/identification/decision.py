@@ -282,7 +282,7 @@ def backward(accepted: list[Evaluation], model, full: float, refit_without: Call
         drop = full - s
         if drop < THRESHOLD_POINTS:
             log(f"backward: dropped {what.candidate.label} (removing it costs {drop:.2f} points)")
-            for u in unit:
+            for u in unit + ([what] if what is not unit[0] else []):
                 u.reasons.append(f"dropped in the backward pass: removing {'the pair' if len(unit) > 1 else 'it'} "
                                  f"costs only {drop:.2f} points")
             model, accepted, full = minus, rest, s
@@ -309,6 +309,8 @@ def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Call
         ev.reasons.append(f"dropped in the final check: removing it from the refitted model costs only {w[k]:.2f} points")
         log(f"final check: dropped {ev.candidate.label} ({w[k]:.2f} points)")
         if ev.pair is not None:     # a pair was identified together: its other member goes with it
+            ev.pair.reasons.append(f"dropped in the final check: removing {ev.candidate.label} from the refitted "
+                                   f"model costs only {w[k]:.2f} points")
             for other in [e for e in chosen if e.pair is ev.pair]:
                 chosen.remove(other)
                 other.reasons.append(f"dropped in the final check with {ev.candidate.label}, named together with it")
