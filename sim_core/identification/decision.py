@@ -254,11 +254,9 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         done = {e.key for e in accepted}
         # a large effect masks the others: every remaining candidate gets another chance
         pool = [c for c in cands if (c.effect, c.joint) not in done]
-        if len(accepted) >= max_effects:
+        if len(accepted) >= max_effects:      # a pair can reach the limit before its round count does
             stopped = f"reached {max_effects} effects"
             break
-    else:
-        stopped = f"reached {max_effects} effects"
     return Forward(accepted, rounds, model, stopped, pairs_tried)
 
 
