@@ -41,6 +41,7 @@ from sim_core.components.spool import (
     SPOOL_X, advance_chain, chain_derivative, metering_position, refresh_command_chain, spool_position, stuck_spool,
 )
 from sim_core.dynamics.rigid_body import crba, kinematics, ltl_factor, ltl_solve, rnea
+from sim_core.kernel.borrow import borrow
 from sim_core.kernel.layout import (
     AP_DOF, AP_KIND, AP_U_MAX, AP_U_MIN, ERR_NAN, GP_ENERGY, GP_H_MAX, GP_RB_EVERY, XG_E_ACT, XG_E_COMPRESS,
     XG_E_LEAK, XG_E_MECH, XG_E_SUPPLY, XG_E_TANK, XG_E_VALVE, XG_ERROR, XG_HIST_COUNT, XG_STEPS, XG_TIME, XS_U_EFF,
@@ -88,7 +89,7 @@ def prime_actuators(DP, AP, XQ, XS):
         act_prime(a, th, AP, XS)
 
 
-@njit(**_NJ)
+@njit(inline="always")
 def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
     n = tree.parent.shape[0]
     na = AP.shape[0]
@@ -316,6 +317,9 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, Yt, Yq, Yqd, 
     Row ``k`` of the outputs holds the state at the end of step ``k``. Returns the number of steps
     completed; on a non-finite state the last good state is restored and ``XG[XG_ERROR]`` is set.
     """
+    # unowned views: no reference counting in the loop (the caller holds the arrays for the call)
+    dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU = borrow((dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU))
+    rng, ws, Yt, Yq, Yqd, Ya = borrow((rng, ws, Yt, Yq, Yqd, Ya))
     n_out = dts.shape[0]
     na = AP.shape[0]
     cap = HT.shape[0]
@@ -366,6 +370,7 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, Yt, Yq, Yqd, 
 def derivatives(ueff, tree, DP, AP, GP, XQ, XS, p_s_state, ws, dXQ, dXS):
     """dX/dt of the plant at state (XQ, XS, supply pressure) with the effective commands ``ueff``
     (after the command-path effects, applied exactly by the reference solver). Returns dp_s/dt."""
+    ueff, tree, DP, AP, GP, XQ, XS, ws, dXQ, dXS = borrow((ueff, tree, DP, AP, GP, XQ, XS, ws, dXQ, dXS))
     n = tree.parent.shape[0]
     na = AP.shape[0]
     q = XQ[0]
