@@ -101,6 +101,7 @@ def lower(spec: RobotSpec) -> Lowered:
     spec.fluid.lower_global(lw, spec)
     GP[L.GP_H_MAX] = spec.integrator["max_substep"]
     GP[L.GP_RB_EVERY] = spec.integrator["rigid_body_refresh"]
+    GP[L.GP_JAC_TOL] = spec.integrator["jacobian_tolerance"]
 
     for e in effects:
         eff = get_effect(e.name)

@@ -127,12 +127,14 @@ XG.declare(
     col("ERROR", "-", "kernel error code (0 ok): 1 NaN, 2 delay line overrun"),
     col("STEPS", "-", "substeps taken"),
     col("HIST_COUNT", "-", "command events written to the delay line"),
+    col("FACTORS", "-", "factorisations of M + h dF/dqd (at refreshes, and where the implicit damping moved)"),
 )
 GP.declare(
     "kernel",
     col("ENERGY", "-", "1.0: keep the energy ledger (costs ~10 %)"),
     col("H_MAX", "s", "largest integrator substep"),
     col("RB_EVERY", "-", "refresh M(q) and bias every k substeps (0: once per output step)"),
+    col("JAC_TOL", "-", "refactor M + h dF/dqd between refreshes when a diagonal damping term moves by this fraction"),
 )
 AP.declare(
     "kernel",

@@ -43,8 +43,8 @@ from sim_core.components.spool import (
 from sim_core.dynamics.rigid_body import crba, kinematics, ltl_factor, ltl_solve, rnea
 from sim_core.kernel.borrow import borrow
 from sim_core.kernel.layout import (
-    AP_DOF, AP_KIND, AP_U_MAX, AP_U_MIN, ERR_NAN, GP_ENERGY, GP_H_MAX, GP_RB_EVERY, XG_E_ACT, XG_E_COMPRESS,
-    XG_E_LEAK, XG_E_MECH, XG_E_SUPPLY, XG_E_TANK, XG_E_VALVE, XG_ERROR, XG_HIST_COUNT, XG_STEPS, XG_TIME, XS_U_EFF,
+    AP_DOF, AP_KIND, AP_U_MAX, AP_U_MIN, ERR_NAN, GP_ENERGY, GP_H_MAX, GP_JAC_TOL, GP_RB_EVERY, XG_E_ACT, XG_E_COMPRESS,
+    XG_E_LEAK, XG_E_MECH, XG_E_SUPPLY, XG_E_TANK, XG_E_VALVE, XG_ERROR, XG_FACTORS, XG_HIST_COUNT, XG_STEPS, XG_TIME, XS_U_EFF,
     YA_ANGLE, YA_P_A, YA_P_B, YA_Q_A, YA_SENS_V, YA_SPOOL, YA_U,
 )
 
@@ -90,7 +90,7 @@ def prime_actuators(DP, AP, XQ, XS):
 
 
 @njit(inline="always")
-def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
+def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb, refactor):
     n = tree.parent.shape[0]
     na = AP.shape[0]
     q = XQ[0]
@@ -151,19 +151,35 @@ def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
         rhs[dof] += tf
         Ffr[dof] += tf
         Sfr[dof] += slope
+    # M only changes at a refresh; the implicit damping on its diagonal (seal friction through the
+    # moment arm, friction slopes, end-stop contact) every substep. Between refreshes the factor is
+    # kept while each diagonal term stays within GP_JAC_TOL of the one it was factored with (a
+    # W-method: the update stays consistent, and the energy ledger books the difference).
+    Dfac = ws.Dfac
+    Dnew = ws.Dnew
+    tol = GP[GP_JAC_TOL]
     for i in range(n):
-        for j in range(n):
-            Lf[i, j] = ws.M[i, j]
-        Lf[i, i] += h * (Dlin[i] - Sfr[i]) + h * h * Kst[i]   # stop spring implicit: q_new = q + h qd_new
+        Dnew[i] = h * (Dlin[i] - Sfr[i]) + h * h * Kst[i]   # stop spring implicit: q_new = q + h qd_new
+        if abs(Dnew[i] - Dfac[i]) > tol * (ws.M[i, i] + abs(Dfac[i])):
+            refactor = True
+    if refactor:
+        for i in range(n):
+            for j in range(n):
+                Lf[i, j] = ws.M[i, j]
+            Lf[i, i] += Dnew[i]
+            Dfac[i] = Dnew[i]
     for i in range(n):
         if DP[i, LOCKED] != 0.0:  # held rigid: qdd = 0, the free joints see the reduced dynamics
-            for j in range(n):
-                Lf[i, j] = 0.0
-                Lf[j, i] = 0.0
-            Lf[i, i] = 1.0
+            if refactor:
+                for j in range(n):
+                    Lf[i, j] = 0.0
+                    Lf[j, i] = 0.0
+                Lf[i, i] = 1.0
             rhs[i] = 0.0
             qd[i] = 0.0
-    ltl_factor(tree.parent, Lf)
+    if refactor:
+        ltl_factor(tree.parent, Lf)
+        XG[XG_FACTORS] += 1.0
     ltl_solve(tree.parent, Lf, rhs)  # rhs now holds qdd
     if energy:
         for i in range(n):
@@ -173,7 +189,8 @@ def substep(h, t, u_in, tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh_rb):
         if energy:
             # dissipated power of the linearly implicit terms, at the mean velocity of the step
             vavg = 0.5 * (qd[i] + qd_new)
-            XG[XG_E_MECH] += h * (Dlin[i] * qd_new - Ffr[i] - Sfr[i] * (qd_new - qd[i])) * vavg
+            XG[XG_E_MECH] += h * (Dlin[i] * qd_new - Ffr[i] - Sfr[i] * (qd_new - qd[i])
+                                  + (Dfac[i] - Dnew[i]) / h * (qd_new - qd[i])) * vavg
             XG[XG_E_ACT] += h * Tact[i] * vavg
         qd[i] = qd_new
         q[i] += h * qd_new
@@ -350,7 +367,9 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, Yt, Yq, Yqd, 
         refresh_command_chain(AP, h, ws.Acc, ws.Bcc, ws.expw)
         for s in range(nsub):
             refresh = (s == 0) if rb_every <= 0 else (int(XG[XG_STEPS]) % rb_every == 0)
-            substep(h, t + s * h, HU[slot], tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh)
+            # the first substep of a call factors afresh: the parameters (locks) may have changed
+            substep(h, t + s * h, HU[slot], tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh,
+                    refresh or (k == 0 and s == 0))
             XG[XG_STEPS] += 1.0
         XG[XG_TIME] = t + dt
         if not _state_ok(XQ, XS, XG):

@@ -20,8 +20,9 @@ Workspace = namedtuple("Workspace", [
     "Rw", "ow", "aw", "cw", "Iw", "tmp33",
     # recursions (RNEA, CRBA)
     "w", "dw", "ao", "F", "N", "mc", "hc", "Ic",
-    # mass matrix, its factor, bias forces, zero accelerations
-    "M", "Lf", "bias", "zero",
+    # mass matrix, the factor of M + h dF/dqd and the diagonal it was factored with (Dfac) against
+    # this substep's (Dnew), bias forces, zero accelerations
+    "M", "Lf", "Dfac", "Dnew", "bias", "zero",
     # per joint: right-hand side, damping slope, friction and its slope, actuator work, stop stiffness,
     # velocities before the substep (energy ledger)
     "rhs", "Dlin", "Ffr", "Sfr", "Tact", "Kst", "qd0",
@@ -49,7 +50,7 @@ def make_workspace(n: int, na: int) -> Workspace:
     return Workspace(
         Rw=z((n, 3, 3)), ow=z((n, 3)), aw=z((n, 3)), cw=z((n, 3)), Iw=z((n, 3, 3)), tmp33=z((3, 3)),
         w=z((n, 3)), dw=z((n, 3)), ao=z((n, 3)), F=z((n, 3)), N=z((n, 3)), mc=z(n), hc=z((n, 3)), Ic=z((n, 3, 3)),
-        M=z((n, n)), Lf=z((n, n)), bias=z(n), zero=z(n),
+        M=z((n, n)), Lf=z((n, n)), Dfac=z(n), Dnew=z(n), bias=z(n), zero=z(n),
         rhs=z(n), Dlin=z(n), Ffr=z(n), Sfr=z(n), Tact=z(n), Kst=z(n), qd0=z(n),
         spool_s=z(na),
         Acc=z((5, 5)), Bcc=z((5, 2)), expw=z((6, 7, 7)),
