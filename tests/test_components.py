@@ -62,19 +62,22 @@ def test_command_chain_discretisation_matches_scipy_expm():
 def test_command_chain_for_another_substep_is_exact(h):
     """A substep other than the first is reached from the base one (Phi0 e^{A d}, Gam0 + Phi0 Gam(d)):
     the result equals scipy's exponential at that substep to rounding, for shorter and longer ones,
-    and the stiff spool (300 Hz) included."""
+    and the stiff spool (300 Hz) included; an actuator with the same chain as an earlier one shares
+    its matrices, one with another chain does not."""
     from sim_core.components.spool import (CMD_H, CMD_H0, GAM, LAG_TAU, PHI, SOL_TAU, SPOOL_GAIN,
                                            SPOOL_WN, SPOOL_ZETA, command_chain_matrix, refresh_command_chain)
     from sim_core.kernel import layout as L
 
-    AP = np.zeros((2, L.AP_N))
-    for a, (tau, fn, zeta, gain, lag) in enumerate([(4e-3, 25.0, 0.8, 0.667, 0.01), (2e-3, 300.0, 0.2, 5.0, 1e-3)]):
+    AP = np.zeros((4, L.AP_N))
+    chains = [(4e-3, 25.0, 0.8, 0.667, 0.01), (2e-3, 300.0, 0.2, 5.0, 1e-3), (4e-3, 25.0, 0.8, 0.667, 0.01),
+              (4e-3, 25.0, 0.8, 0.667, 0.02)]
+    for a, (tau, fn, zeta, gain, lag) in enumerate(chains):
         AP[a, SOL_TAU], AP[a, SPOOL_WN], AP[a, SPOOL_ZETA] = tau, 2 * math.pi * fn, zeta
         AP[a, SPOOL_GAIN], AP[a, LAG_TAU], AP[a, CMD_H], AP[a, CMD_H0] = gain, lag, -1.0, -1.0
     Acc, Bcc, work = np.zeros((5, 5)), np.zeros((5, 2)), np.zeros((6, 7, 7))
     refresh_command_chain(AP, 2.5e-4, Acc, Bcc, work)
     refresh_command_chain(AP, h, Acc, Bcc, work)
-    for a in range(2):
+    for a in range(4):
         assert AP[a, CMD_H0] == 2.5e-4 and AP[a, CMD_H] == h
         A, B = np.zeros((5, 5)), np.zeros((5, 2))
         command_chain_matrix(AP[a, SOL_TAU], AP[a, SPOOL_WN], AP[a, SPOOL_ZETA], AP[a, SPOOL_GAIN], AP[a, LAG_TAU], A, B)

@@ -219,10 +219,23 @@ def refresh_command_chain(AP, h, Acc, Bcc, expw):
     as Phi(h) = Phi0 e^{A d}, Gam(h) = Gam0 + Phi0 Gam(d) with d = h - h0 (exact: the semigroup
     property), where the short (or negative) d needs a few Taylor terms only. A jittered time grid,
     whose substep changes at every output step, thus costs about as much as a regular one.
-    ``expw`` is [6, 7, 7] scratch.
+    Actuators with the same chain (one valve type on every joint) share one discretisation: an
+    actuator whose parameters equal an earlier one's takes that one's matrices. ``expw`` is
+    [6, 7, 7] scratch.
     """
     for a in range(AP.shape[0]):
         if abs(AP[a, CMD_H] - h) <= 1e-9 * h:  # grids from arange differ in the last bits
+            continue
+        twin = -1
+        for b in range(a):
+            if (AP[b, SOL_TAU] == AP[a, SOL_TAU] and AP[b, SPOOL_WN] == AP[a, SPOOL_WN]
+                    and AP[b, SPOOL_ZETA] == AP[a, SPOOL_ZETA] and AP[b, SPOOL_GAIN] == AP[a, SPOOL_GAIN]
+                    and AP[b, LAG_TAU] == AP[a, LAG_TAU]):
+                twin = b     # already brought to this h above
+                break
+        if twin >= 0:
+            for c in range(CMD_H, GAM0 + 10):
+                AP[a, c] = AP[twin, c]
             continue
         command_chain_matrix(AP[a, SOL_TAU], AP[a, SPOOL_WN], AP[a, SPOOL_ZETA],
                              AP[a, SPOOL_GAIN], AP[a, LAG_TAU], Acc, Bcc)
