@@ -1,5 +1,5 @@
 """Speed of ``hydrohil diagnose`` on a 60 s, 200 Hz single-joint record with every candidate (issue 5:
-<= 30 s on a 2-core machine). The record is made with the real commands (excite + simulate, a hidden
+<= 30 s on a 2-core machine; the later goal: <= 6 s with both cores). The record is made with the real commands (excite + simulate, a hidden
 deadband on the HydroLek shoulder, and a clean record); the diagnosis and its report run as the CLI
 does, in this process. Reference measured in the same run: one free-run simulation of the record at the default
 integrator settings, so the figure also reads as "diagnose costs N simulations".
@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 TARGET_S = 30.0
+GOAL_S = 6.0         # every candidate and the report, both cores of a 2-core machine
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -72,7 +73,7 @@ def main():
             sims = sum(e.sims for r in d.evaluations for e in r)
             key = f"{name}/workers={w or os.cpu_count()}"
             results["runs"][key] = {
-                "seconds": el, "target_s": TARGET_S, "ratio_to_target": el / TARGET_S,
+                "seconds": el, "target_s": TARGET_S, "ratio_to_target": el / TARGET_S, "goal_s": GOAL_S,
                 "ratio_to_one_simulation": el / sim_s, "candidate_fits": sum(len(r) for r in d.evaluations),
                 "candidate_simulations": sims, "verdict": d.verdict,
                 "selected": [s["effect"] + "@" + str(s["joint"]) for s in d.selected], "stages_s": d.timings,
@@ -81,9 +82,9 @@ def main():
         print(json.dumps(results, indent=2))
         return
     print(f"{results['cpus']} CPUs, load average {load:.2f}; one 60 s simulation at default settings: {sim_s:.3f} s")
-    print(f"{'record':<22} {'seconds':>8} {'target':>7} {'ratio':>6} {'x sim':>6} {'fits':>5} {'sims':>6}  verdict")
+    print(f"{'record':<22} {'seconds':>8} {'target':>7} {'ratio':>6} {'goal':>5} {'x sim':>6} {'fits':>5} {'sims':>6}  verdict")
     for key, r in results["runs"].items():
-        print(f"{key:<22} {r['seconds']:8.1f} {TARGET_S:7.0f} {r['ratio_to_target']:6.2f} {r['ratio_to_one_simulation']:6.0f} "
+        print(f"{key:<22} {r['seconds']:8.1f} {TARGET_S:7.0f} {r['ratio_to_target']:6.2f} {GOAL_S:5.0f} {r['ratio_to_one_simulation']:6.0f} "
               f"{r['candidate_fits']:5d} {r['candidate_simulations']:6d}  {r['verdict']} {' '.join(r['selected'])}")
 
 
