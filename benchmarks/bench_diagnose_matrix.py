@@ -1,0 +1,443 @@
+"""A scored matrix for ``hydrohil diagnose``: every effect of the bank x seeds x two robots, the
+confusable pairs and others, clean records with realistic nuisances, and mismatches the bank has no
+name for. One table, one JSON summary.
+
+Robots: the built-in HydroLek (shoulder j2, open loop at 200 Hz, 30 s) and a rig made by ``rig new
+boom`` (closed loop under P control at 50 Hz, 60 s, jittered timestamps, start 5 % of the stroke off,
+headerless sensor volts, no pressures, its valve flow x1.1 and supply x0.9 against the spec: the
+tests' generator ``tests/rig_records.py``, then ``hydrohil import``). Every record is made and
+diagnosed with the real commands.
+
+* singles: every effect the bank offers on the joint (``candidates.bank``), one per seed; the
+  magnitude of seed k of N is drawn from the k-th of N strata of the effect's range (``RANGES``, in
+  the actuator's own scales), so the seeds cover the range, not its middle; HydroLek's excitation
+  cycles through PRBS (``hydrohil excite``), a multisine and operator-like doublets with holds; the
+  rig's is closed-loop steps; the nominal model is off a few percent (valve flow, spool bandwidth,
+  seal friction) and the angle noise is drawn in 0.2-1 mrad;
+* pairs: every pair the effects' ``CONFUSIONS`` catalog lists, and ``OTHER_PAIRS`` (incl. the known
+  miss: a wider deadband plus Coulomb friction on the harvester boom);
+* clean: HydroLek at 50 Hz with jittered timestamps, start pose off the spec's, a 12-bit angle and
+  1 mrad noise; the rig's clean record;
+* out of bank: supply pressure -15 %, oil bulk modulus -15 %, link masses +15 %, a Stribeck friction
+  curve (not a diagnosis candidate), an unmodelled 8 Hz mode between the elbow and its sensor. (A
+  valve whose flow law has another exponent is not built: the simulator has no such valve.)
+
+Scored: a single is right when the hidden effect is named alone; a pair when both are named and
+nothing else; a clean record when the verdict is ``no_significant_discrepancy``; an out-of-bank record
+is wrong when any bank effect is named (a calibration finding or ``unexplained_discrepancy`` is
+right). Parameter error: the hidden effect's first parameter, on the singles named right.
+
+    .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
+        [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
+
+``--results`` keeps every finished case (one JSON line each) and skips them on the next run, so a long
+matrix can be run in parts. About 20-40 s per case on a 2-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import itertools
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))     # the rig record generator the tests use
+
+from rig_records import closed_loop_record, write_headerless  # noqa: E402
+
+from sim_core.effects import EFFECTS  # noqa: E402
+from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
+from sim_core.model.spec import load_robot  # noqa: E402
+
+GOALS = {"singles_right_pct": (">=", 95.0), "pairs_right_pct": (">=", 80.0), "clean_false_alarm_pct": ("<=", 0.0),
+         "out_of_bank_wrong_pct": ("<=", 10.0), "worst_param_error_pct": ("<=", 10.0)}
+RATE = 200.0
+DURATION = 30.0
+JOINT = "j2"
+
+# effect -> (parameter, low, high, scale, log, two-sided): the hidden magnitude's range; scale names
+# an actuator_scales entry ("torque", "q_full", "leak": q_full / supply pressure, "area_ratio") or
+# "" for absolute values; two-sided: the draw's side (below or above the no-effect value) is random
+RANGES = {
+    "deadband": ("width", 0.4, 1.6, "", False, False),                  # V
+    "valve_asymmetry": ("ratio", 0.65, 0.9, "", False, True),           # one edge passes less (or more: 1/r)
+    "spool_lag": ("time_constant", 0.03, 0.12, "", True, False),        # s
+    "delay": ("delay", 0.02, 0.1, "", False, False),                    # s
+    "leakage": ("internal", 0.01, 0.06, "leak", True, False),           # x full flow / supply pressure
+    "coulomb_friction": ("torque", 0.02, 0.08, "torque", True, False),  # x full-pressure torque
+    "backlash": ("width", 0.008, 0.03, "", True, False),                # rad
+    "area_ratio": ("ratio", 0.75, 0.9, "area_ratio", False, False),     # x the spec's annulus/bore ratio
+    "flow_saturation": ("max_flow", 0.35, 0.75, "q_full", False, False),
+    "line_dynamics": ("bulk_modulus_scale", 0.25, 0.6, "", True, False),
+    "joint_compliance": ("frequency", 2.5, 8.0, "", True, False),       # Hz
+    "payload": ("mass", 0.15, 0.6, "link", False, False),               # x the moved links' mass
+    "sensor_offset": ("offset", 0.01, 0.04, "", False, True),           # rad
+    "sensor_gain": ("gain", 0.03, 0.08, "", False, True),               # 1 +- this
+    "hysteresis": ("width", 0.3, 1.0, "", False, False),                # V
+    "bulk_modulus": ("scale", 0.3, 0.65, "", True, False),
+}
+# pairs beyond the CONFUSIONS catalog: (effect, effect[, robot, joint])
+OTHER_PAIRS = [("deadband", "coulomb_friction", "harvester", "boom"), ("deadband", "delay"), ("deadband", "leakage"),
+               ("deadband", "sensor_offset"), ("valve_asymmetry", "delay"), ("spool_lag", "coulomb_friction"),
+               ("hysteresis", "backlash"), ("leakage", "delay"), ("flow_saturation", "deadband"),
+               ("backlash", "coulomb_friction"), ("area_ratio", "deadband"), ("joint_compliance", "delay")]
+SENSOR_EFFECTS = {"sensor_offset", "sensor_gain"}   # told from the start pose: the HydroLek records are homed
+
+
+def cli(*args) -> None:
+    p = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT)
+    if p.returncode:
+        raise RuntimeError(f"hydrohil {' '.join(map(str, args[:2]))}: {p.stderr.strip()[-600:]}")
+
+
+def subtree_link_mass(spec, joint) -> float:
+    from sim_core.identification.candidates import subtree_mass
+    return float(subtree_mass(spec.tree, spec.joint(joint).dof))
+
+
+def magnitude(effect: str, spec, joint: str | None, k: int, n: int, rng) -> dict:
+    """The hidden effect's parameters for seed k of n (stratum k of the effect's range)."""
+    pname, lo, hi, scale, log, two_sided = RANGES[effect]
+    u = (k + rng.uniform()) / n
+    v = float(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))) if log else lo + u * (hi - lo)
+    sc = actuator_scales(spec, joint) if joint else {}
+    if scale == "leak":
+        v *= sc["q_full"] / spec.supply["pressure"]
+    elif scale == "link":
+        v *= subtree_link_mass(spec, joint)
+    elif scale:
+        v *= sc[scale]
+    if effect == "valve_asymmetry" and rng.random() < 0.5:
+        v = 1.0 / v
+    elif effect == "sensor_gain":
+        v = 1.0 + (v if rng.random() < 0.5 else -v)
+    elif two_sided and rng.random() < 0.5:
+        v = -v
+    out = {pname: v}
+    if effect == "leakage":
+        out["external"] = 0.0
+    return out
+
+
+def excitation(kind: str, seconds: float, rate: float, rng) -> np.ndarray:
+    """Open-loop valve command (V) of the given kind."""
+    t = np.arange(int(seconds * rate)) / rate
+    if kind == "multisine":
+        u = sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in (0.15, 0.35, 0.7, 1.3, 2.1))
+        return 4.5 * u / np.abs(u).max()
+    # doublets with holds: an operator pushes the lever one way, then back, then rests
+    u = np.zeros_like(t)
+    i = 0
+    while i < t.size:
+        hold = int(rng.uniform(0.8, 2.5) * rate)
+        push = int(rng.uniform(0.4, 1.2) * rate)
+        a = rng.uniform(2.0, 6.0) * rng.choice([-1.0, 1.0])
+        u[i + hold:i + hold + push] = a
+        u[i + hold + push:i + hold + 2 * push] = -a
+        i += hold + 2 * push
+    return u
+
+
+def write_input(path: Path, joint: str, u: np.ndarray, times: np.ndarray) -> None:
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", f"u_{joint}"])
+        for ti, ui in zip(times, u):
+            w.writerow([f"{ti:.6f}", f"{ui:.5f}"])
+
+
+def postprocess(path: Path, joint: str, quantum: float | None = None, mode_hz: float | None = None) -> None:
+    """12-bit angle quantisation, or an unmodelled lightly damped mode between link and sensor."""
+    from scipy import signal
+    names = path.read_text().splitlines()[0].split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
+    t, q = data[:, names.index("time")], data[:, names.index(f"q_{joint}")]
+    if mode_hz:
+        w, zeta = 2 * np.pi * mode_hz, 0.03
+        _, x, _ = signal.lsim(signal.TransferFunction([-1.0, 0.0, 0.0], [1.0, 2 * zeta * w, w * w]), q - q[0], t)
+        q = q + 4.0 * x
+    if quantum:
+        q = np.round(q / quantum) * quantum
+    data[:, names.index(f"q_{joint}")] = q
+    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.9g")
+
+
+def heavier_links(src: Path, dst: Path, factor: float) -> Path:
+    """A copy of a robot directory whose URDF link masses and inertias are ``factor`` times larger."""
+    shutil.copytree(src, dst)
+    urdf = next(dst.glob("*.urdf"))
+    text = urdf.read_text()
+    text = re.sub(r'(<mass\s+value=")([-0-9.eE+]+)(")', lambda m: f"{m[1]}{float(m[2]) * factor!r}{m[3]}", text)
+    text = re.sub(r'(i[xyz][xyz]=")([-0-9.eE+]+)(")', lambda m: f"{m[1]}{float(m[2]) * factor!r}{m[3]}", text)
+    urdf.write_text(text)
+    return dst
+
+
+def nominal_off(spec, joint: str, rng) -> list[str]:
+    """--set arguments that put the truth a few percent off the nominal model."""
+    js = spec.joint(joint)
+    act = "cylinder" if js.kind == "cylinder" else "rotary"
+    out = []
+    for path, rel in ((f"joints.{joint}.valve.rated_flow", 0.05), (f"joints.{joint}.spool.natural_frequency", 0.05),
+                      (f"joints.{joint}.{act}.viscous_friction", 0.1)):
+        v = spec.get(path)
+        if v:
+            out += ["--set", f"{path}={v * (1.0 + rng.uniform(-rel, rel))!r}"]
+    return out
+
+
+def effect_arg(name: str, joint: str | None, params: dict) -> str:
+    body = ",".join([f"joint={joint}"] * (joint is not None) + [f"{k}={v!r}" for k, v in params.items()])
+    return f"{name}:{body}" if body else name
+
+
+# ---- records ------------------------------------------------------------------------------------------
+def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
+    """Open-loop record of a built-in robot; returns (csv, robot to diagnose with, diagnose options)."""
+    robot, joint, seed = case["robot"], case["joint"], case["seed"]
+    rng = np.random.default_rng(seed)
+    spec = load_robot(robot)
+    rate = case.get("rate", RATE)
+    inp = work / "in.csv"
+    kind = case.get("excitation", "prbs")
+    if kind == "prbs" and rate == RATE and not case.get("jitter"):
+        cli("excite", "--robot", robot, "--joint", joint, "--duration", DURATION, "--seed", seed, "--out", inp)
+    else:
+        n = int(DURATION * rate)
+        times = np.arange(n) / rate
+        if case.get("jitter"):
+            times = times + rng.uniform(-0.1, 0.1, n) / rate
+            times[0] = 0.0
+        if kind == "prbs":
+            levels = rng.choice(np.linspace(-5, 5, 5), int(DURATION / 0.5) + 1)
+            u = np.repeat(levels, int(0.5 * rate))[:n]
+        else:
+            u = excitation(kind, DURATION, rate, rng)
+        write_input(inp, joint, u, times)
+    truth_robot = robot
+    if case.get("heavier_links"):
+        truth_robot = heavier_links(ROOT / "sim_core" / "robots" / robot, work / "truth_robot", case["heavier_links"])
+    args = ["simulate", "--robot", truth_robot, "--input", inp, "--out", work / "measured.csv",
+            "--noise-angle", case["noise"], "--seed", seed, *nominal_off(spec, joint, rng), *case.get("set", [])]
+    for name, j, params in case["hidden"]:
+        args += ["--effect", effect_arg(name, j, params)]
+    if case.get("start_offset"):
+        q0 = float(spec.joint(joint).settings["initial_position"]) + case["start_offset"]
+        args += ["--set", f"joints.{joint}.initial_position={q0!r}"]
+    cli(*args)
+    postprocess(work / "measured.csv", joint, case.get("quantum"), case.get("mode_hz"))
+    options = ["--initial-pose", "spec"] if any(n in SENSOR_EFFECTS for n, _, _ in case["hidden"]) else []
+    return work / "measured.csv", robot, options
+
+
+def rig_record(work: Path, case: dict) -> tuple[Path, str, list]:
+    """The user's way: rig new -> closed-loop record -> import."""
+    rig = work / "rig"
+    cli("rig", "new", case["template"], "--out", rig)
+    spec = load_robot(rig)
+    joint = spec.joint_names[0]
+    i = spec.tree.index(spec.joint(joint).dof)
+    span = float(spec.tree.upper[i] - spec.tree.lower[i])
+    off = {f"joints.{joint}.valve.rated_flow": 1.1, "supply.pressure": 0.9}
+    hidden = [(name, params) for name, _, params in case["hidden"]]
+    rows, _ = closed_loop_record(rig, hidden=hidden[0] if hidden else None, off=off, seed=case["seed"],
+                                 duration=60.0, start_offset=0.05 * span)
+    write_headerless(rows, work / "log.csv")
+    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
+    return work / "rec.csv", str(rig), []
+
+
+# ---- the matrix ---------------------------------------------------------------------------------------
+def offered(spec, joint: str) -> list[tuple[str, str | None]]:
+    """(effect, joint) of every candidate the diagnosis offers on ``joint`` (global ones with None)."""
+    seen, out = set(), []
+    for c in bank(spec, [joint]):
+        if c.effect in RANGES and c.effect not in seen and (c.joint in (joint, None)):
+            seen.add(c.effect)
+            out.append((c.effect, c.joint))
+    return out
+
+
+def build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
+    cases = []
+    if "singles" in groups:
+        if "hydrolek" in robots:
+            spec = load_robot("hydrolek")
+            for (effect, j), k in itertools.product(offered(spec, JOINT), range(seeds)):
+                rng = np.random.default_rng(1000 + 17 * k + len(cases))
+                cases.append({"id": f"single/hydrolek/{effect}/{k + 1}", "group": "singles", "robot": "hydrolek",
+                              "joint": JOINT, "seed": 100 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3],
+                              "noise": float(rng.uniform(2e-4, 1e-3)),
+                              "hidden": [(effect, j, magnitude(effect, spec, JOINT, k, seeds, rng))]})
+        if "rig" in robots:
+            tmp = Path(tempfile.mkdtemp())
+            cli("rig", "new", "boom", "--out", tmp / "rig")
+            spec = load_robot(tmp / "rig")
+            joint = spec.joint_names[0]
+            for (effect, j), k in itertools.product(offered(spec, joint), range(seeds)):
+                if j is None:       # the rig generator hides effects on its joint
+                    continue
+                rng = np.random.default_rng(2000 + 17 * k + len(cases))
+                cases.append({"id": f"single/rig_boom/{effect}/{k + 1}", "group": "singles", "robot": "rig",
+                              "template": "boom", "joint": joint, "seed": 200 + k,
+                              "hidden": [(effect, j, magnitude(effect, spec, joint, k, seeds, rng))]})
+            shutil.rmtree(tmp, ignore_errors=True)
+    if "pairs" in groups:
+        catalog = sorted({tuple(sorted((a, b))) for a, e in EFFECTS.items() for b in e.CONFUSIONS})
+        for n, pair in enumerate(catalog + OTHER_PAIRS):
+            a, b, *where = pair
+            robot, joint = where if where else ("hydrolek", JOINT)
+            spec = load_robot(robot)
+            if a not in RANGES or b not in RANGES:
+                continue
+            rng = np.random.default_rng(3000 + n)
+            hidden = []
+            for e in (a, b):
+                j = None if EFFECTS[e].scope == "global" else joint
+                params = magnitude(e, spec, joint, 1, 3, rng)    # mid-range: a pair is hard enough
+                if robot == "harvester" and e == "deadband":
+                    params = {"width": 1.7}                       # its nominal deadband is 1.2 V
+                hidden.append((e, j, params))
+            cases.append({"id": f"pair/{robot}/{a}+{b}", "group": "pairs", "robot": robot, "joint": joint,
+                          "seed": 300 + n, "excitation": "prbs", "noise": 4e-4, "hidden": hidden})
+    if "clean" in groups:
+        for k in range(seeds):
+            if "hydrolek" in robots:
+                cases.append({"id": f"clean/hydrolek/{k + 1}", "group": "clean", "robot": "hydrolek", "joint": JOINT,
+                              "seed": 400 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3], "rate": 50.0,
+                              "jitter": True, "start_offset": (-0.04, 0.05, 0.03)[k % 3],
+                              "quantum": 2 * np.pi / 4096, "noise": 1e-3, "hidden": []})
+            if "rig" in robots:
+                cases.append({"id": f"clean/rig_boom/{k + 1}", "group": "clean", "robot": "rig", "template": "boom",
+                              "seed": 450 + k, "hidden": []})
+    if "out_of_bank" in groups:
+        oob = [("supply_-15%", {"set": ["--set", "supply.pressure=13.6e6"]}),
+               ("bulk_modulus_-15%", {"set": ["--set", "fluid.bulk_modulus=1.19e9"]}),
+               ("link_masses_+15%", {"heavier_links": 1.15}),
+               ("stribeck_curve", {"hidden": [("stribeck_friction", JOINT, {"static_torque": 120.0, "coulomb_torque": 50.0,
+                                                                            "stribeck_velocity": 0.03})]}),
+               ("mode_8Hz", {"mode_hz": 8.0})]
+        for (name, extra), k in itertools.product(oob, range(seeds)):
+            case = {"id": f"out_of_bank/hydrolek/{name}/{k + 1}", "group": "out_of_bank", "robot": "hydrolek",
+                    "joint": JOINT, "seed": 500 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3],
+                    "noise": 4e-4, "hidden": []}
+            case.update(extra)
+            cases.append(case)
+    return cases
+
+
+def run_case(case: dict, work: Path) -> dict:
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    rec, robot, options = (rig_record if case["robot"] == "rig" else builtin_record)(work, case)
+    t0 = time.perf_counter()
+    cli("diagnose", "--robot", robot, rec, "--report", work / "rep", "--quiet", *options)
+    seconds = time.perf_counter() - t0
+    d = json.loads((work / "rep" / "diagnosis.json").read_text())
+    named = sorted((s["effect"], s["joint"]) for s in d["selected"])
+    joint = case.get("joint") or load_robot(robot).joint_names[0]
+    hidden = sorted((n, joint if j is not None else None) for n, j, _ in case["hidden"])
+    out = {"id": case["id"], "group": case["group"], "verdict": d["verdict"], "named": named, "seconds": round(seconds, 1),
+           "hidden": [(n, j, p) for n, j, p in case["hidden"]], "param_error_pct": None}
+    if case["group"] in ("singles", "pairs"):
+        out["right"] = named == hidden
+        if out["right"] and case["group"] == "singles":
+            n, _, p = case["hidden"][0]
+            key = next(iter(p))
+            got = next(s for s in d["selected"] if s["effect"] == n)["params"][key]
+            out["param_error_pct"] = round(100 * abs(got / p[key] - 1.0), 2)
+    elif case["group"] == "clean":
+        out["right"] = d["verdict"] == "no_significant_discrepancy"
+    else:
+        out["right"] = not named
+    return out
+
+
+def summary(rows: list[dict]) -> dict:
+    def pct(sel, key="right"):
+        return round(100 * sum(bool(r[key]) for r in sel) / len(sel), 1) if sel else None
+    g = {k: [r for r in rows if r["group"] == k and "failed" not in r] for k in ("singles", "pairs", "clean", "out_of_bank")}
+    errs = sorted(r["param_error_pct"] for r in g["singles"] if r.get("param_error_pct") is not None)
+    secs = sorted(r["seconds"] for r in rows if "seconds" in r)
+    return {
+        "cases": {k: len(v) for k, v in g.items()}, "failed": sum("failed" in r for r in rows),
+        "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
+        "clean_false_alarm_pct": None if not g["clean"] else round(100 - pct(g["clean"]), 1),
+        "out_of_bank_wrong_pct": None if not g["out_of_bank"] else round(100 - pct(g["out_of_bank"]), 1),
+        "median_param_error_pct": errs[len(errs) // 2] if errs else None,
+        "worst_param_error_pct": errs[-1] if errs else None,
+        "median_diagnose_s": secs[len(secs) // 2] if secs else None,
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--groups", default="singles,pairs,clean,out_of_bank")
+    ap.add_argument("--robots", default="hydrolek,rig")
+    ap.add_argument("--only", help="run the cases whose id contains this text")
+    ap.add_argument("--results", help="JSON-lines file of finished cases: appended to, and skipped on a re-run")
+    ap.add_argument("--json", metavar="FILE", help="write the summary and every case as JSON")
+    args = ap.parse_args()
+    cases = build(args.seeds, set(args.groups.split(",")), set(args.robots.split(",")))
+    if args.only:
+        cases = [c for c in cases if args.only in c["id"]]
+    done = {}
+    if args.results and Path(args.results).is_file():
+        for line in Path(args.results).read_text().splitlines():
+            r = json.loads(line)
+            done[r["id"]] = r
+    tmp = Path(tempfile.mkdtemp(prefix="bench_matrix_"))
+    rows = []
+    for case in cases:
+        if case["id"] in done:
+            rows.append(done[case["id"]])
+            continue
+        try:
+            r = run_case(case, tmp / "case")
+        except Exception as exc:      # a case that fails is a finding, not the end of the run
+            r = {"id": case["id"], "group": case["group"], "right": False, "failed": str(exc)[-300:]}
+        rows.append(r)
+        if args.results:
+            with open(args.results, "a") as fh:
+                fh.write(json.dumps(r) + "\n")
+        if "failed" in r:
+            print(f"{r['id']:48s} FAILED {r['failed']}", flush=True)
+            continue
+        named = ", ".join(f"{e}@{j}" for e, j in r["named"]) or r["verdict"]
+        err = "" if r["param_error_pct"] is None else f" err {r['param_error_pct']:.1f} %"
+        print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{err} ({r['seconds']:.0f} s)", flush=True)
+    s = summary(rows)
+    print(f"\ncases: {s['cases']}, failed to run: {s['failed']}")
+    labels = {"singles_right_pct": "singles named right", "pairs_right_pct": "pairs fully named",
+              "clean_false_alarm_pct": "false alarms on clean records", "out_of_bank_wrong_pct": "wrong names on out-of-bank records",
+              "median_param_error_pct": "median parameter error", "worst_param_error_pct": "worst parameter error"}
+    for key, label in labels.items():
+        v = s[key]
+        goal = GOALS.get(key)
+        mark = ""
+        if v is not None and goal:
+            ok = v >= goal[1] if goal[0] == ">=" else v <= goal[1]
+            mark = f"  goal {goal[0]} {goal[1]:g} %: {'met' if ok else 'NOT met'}"
+        print(f"  {label:38s} {'-' if v is None else f'{v:.1f} %'}{mark}")
+    med = s["median_diagnose_s"]
+    print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"summary": s, "cases": rows}, indent=1))
+    shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
