@@ -91,7 +91,8 @@ class Integrator(Component):
         Parameter("max_substep", "s", "largest integrator substep; output steps are split evenly", 1e-4, 1e-6, 1e-2),
         Parameter("rigid_body_refresh", "substeps", "refresh M(q) and the bias every k substeps; 0 = once per output step", 0.0, 0.0, 1000.0),
         Parameter("jacobian_tolerance", "-", "between refreshes, M + h dF/dqd is factored again only when a joint's implicit damping "
-                  "term has moved by more than this fraction of its diagonal; 0 = factor every substep", 1e-4, 0.0, 0.1),
+                  "term has moved by more than this fraction of its diagonal; 0 = whenever it changed at all (the exact "
+                  "linearly implicit scheme)", 0.0, 0.0, 0.1),
         Parameter("end_stop_frequency", "Hz", "natural frequency of a link on its end stop (lower bound of the stiffness)", 50.0, 1.0, 500.0),
         Parameter("end_stop_penetration", "rad", "how far the actuator's full-pressure torque pushes a joint into its stop", 0.002, 1e-5, 0.1),
         Parameter("end_stop_damping_ratio", "-", "damping ratio of the end stops", 0.7, 0.0, 5.0),
