@@ -12,9 +12,10 @@ import time
 import httpx
 import numpy as np
 import pytest
-
 from web_helpers import (CHROMIUM, CHROMIUM_ARGS, InProcessServer, artifacts_dir, changed, dismiss_notifications,
                          open_page, project, region_mask, require_chromium, settled_screenshot, wait_for)
+
+from web.panel import HOLD_OFF_S
 
 pytestmark = pytest.mark.browser
 
@@ -160,6 +161,28 @@ def test_slider_in_the_page_commands_the_plant(hydrolek):
     m.page.get_by_role("button", name="Neutral j2", exact=True).click()
     wait_for(lambda: svc.documents.state()["joints"]["j2"]["requested_voltage"] == 0.0, 15, "neutral on j2")
     wait_for(lambda: float(s.get_attribute("aria-valuenow")) == 0.0, 15, "the slider back at 0 V")
+
+
+def test_a_state_read_before_the_operator_moved_the_slider_does_not_move_it_back(hydrolek):
+    """The render thread may apply a state it read before the operator's command (a loaded machine):
+    the slider keeps the operator's value; a state read after the hold-off is followed again."""
+    m, svc = hydrolek, hydrolek.server.svc
+    s = slider_of(m, "j3")
+    before = time.monotonic()
+    s.focus()
+    for _ in range(10):
+        m.page.keyboard.press("ArrowRight")
+    wait_for(lambda: svc.documents.state()["joints"]["j3"]["requested_voltage"] == pytest.approx(0.5), 15,
+             "the plant to receive the slider's command")
+    stale = svc.documents.state()
+    stale["joints"]["j3"].update(source="rest", requested_voltage=0.0)   # as it was before the command
+    time.sleep(HOLD_OFF_S + 0.2)          # the render thread stalled past the hold-off, then applies it
+    m.panel._sync_sliders(stale, before)
+    assert m.panel.sliders["j3"].value == pytest.approx(0.5)
+    m.panel._sync_sliders(stale, time.monotonic() + HOLD_OFF_S)
+    assert m.panel.sliders["j3"].value == 0.0
+    m.page.get_by_role("button", name="Neutral j3", exact=True).click()
+    wait_for(lambda: svc.documents.state()["joints"]["j3"]["requested_voltage"] == 0.0, 15, "neutral on j3")
 
 
 def test_estop_in_the_page_neutralises_every_valve(hydrolek):

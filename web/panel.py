@@ -202,6 +202,8 @@ class OperatorPanel:
                 return
             if self._refuse(ev.client):
                 return
+            with self._lock:   # before the command goes out: a state read earlier must not undo it
+                self._touched[j] = time.monotonic()
             # callbacks run on a thread pool: reading the slider and sending its value happen under one
             # lock, so the last command sent is the slider's last value (an earlier callback that read
             # an older value cannot overtake it)
@@ -314,15 +316,17 @@ class OperatorPanel:
         """Every rendered state goes into the plot history (cheap; called at the render rate)."""
         self.history.add(state)
 
-    def update(self, state: dict | None, link_status: dict, viewer_stats: dict) -> None:
+    def update(self, state: dict | None, link_status: dict, viewer_stats: dict,
+               fetched_at: float | None = None) -> None:
+        """``fetched_at``: time.monotonic() when ``state`` was read (default: now)."""
         with self.server.atomic():
-            self._update(state, link_status, viewer_stats)
+            self._update(state, link_status, viewer_stats, time.monotonic() if fetched_at is None else fetched_at)
 
-    def _update(self, state: dict | None, link_status: dict, viewer_stats: dict) -> None:
+    def _update(self, state: dict | None, link_status: dict, viewer_stats: dict, fetched_at: float) -> None:
         self.updates += 1
         if state is not None:
             self._apply_estop(bool(state.get("estop")))
-            self._sync_sliders(state)
+            self._sync_sliders(state, fetched_at)
             for j in self.joints:
                 self.readouts[j].content = self._readout(j, state["joints"].get(j, {}))
             self.faults.content = self._faults_html(state)
@@ -331,14 +335,15 @@ class OperatorPanel:
         self.warnings.content = self._warnings_html(link_status)
         self._update_plots()
 
-    def _sync_sliders(self, state: dict) -> None:
-        now = time.monotonic()
+    def _sync_sliders(self, state: dict, fetched_at: float) -> None:
+        """Follow the plant's command, unless the operator touched the slider less than HOLD_OFF_S
+        before the state was read (or after: a state read before a touch predates its command)."""
         for j in self.joints:
             js = state["joints"].get(j)
             if not js or js.get("source") == "viewer" and self.link.kind == "local":
                 continue
             with self._lock:
-                if now - self._touched.get(j, -1e9) < HOLD_OFF_S:
+                if fetched_at - self._touched.get(j, -1e9) < HOLD_OFF_S:
                     continue
             req = float(js.get("requested_voltage", 0.0))
             if abs(self.sliders[j].value - req) > STEP_V / 2:

@@ -100,12 +100,13 @@ class Viewer:
             t0 = time.perf_counter()
             c0 = time.thread_time()
             try:
+                fetched = time.monotonic()
                 state = self.link.latest()
                 if state is not None:
                     self.scene.update(state)
                     self.panel.record(state)
                 if self.frames % panel_every == 0:
-                    self.panel.update(state, self.link.status(), self.stats())
+                    self.panel.update(state, self.link.status(), self.stats(), fetched_at=fetched)
             except Exception:  # noqa: BLE001 - keep drawing; the plant is unaffected either way
                 log.exception("viewer: frame failed")
             t1 = time.perf_counter()
