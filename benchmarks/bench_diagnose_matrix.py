@@ -70,7 +70,7 @@ JOINT = "j2"
 # "" for absolute values; two-sided: the draw's side (below or above the no-effect value) is random
 RANGES = {
     "deadband": ("width", 0.4, 1.6, "", False, False),                  # V
-    "valve_asymmetry": ("ratio", 0.65, 0.9, "", False, True),           # one edge passes less (or more: 1/r)
+    "valve_asymmetry": ("ratio", 0.65, 0.9, "", False, False),          # one edge passes less (or more: 1/r)
     "spool_lag": ("time_constant", 0.03, 0.12, "", True, False),        # s
     "delay": ("delay", 0.02, 0.1, "", False, False),                    # s
     "leakage": ("internal", 0.01, 0.06, "leak", True, False),           # x full flow / supply pressure
