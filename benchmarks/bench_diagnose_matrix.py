@@ -25,7 +25,17 @@ diagnosed with the real commands.
 Scored: a single is right when the hidden effect is named alone; a pair when both are named and
 nothing else; a clean record when the verdict is ``no_significant_discrepancy``; an out-of-bank record
 is wrong when any bank effect is named (a calibration finding or ``unexplained_discrepancy`` is
-right). Parameter error: the hidden effect's first parameter, on the singles named right.
+right). On the rig, a hidden effect whose parameter the rig's spec marks estimated (the load, the
+sensor's gain and offset) is calibrated as a nuisance, not offered as a discrepancy: that single is
+right when nothing is named and the calibration moved the parameter (identified, beyond 3 sigma of
+its nominal value) towards the truth. Parameter error: the hidden effect's first parameter (or that
+calibrated value), on the singles named right.
+
+Each single also gets its hidden effect's trace: the RMS difference of the recorded angle with and
+without the effect (noise-free truths for HydroLek; the same closed-loop seed for the rig), printed
+as a multiple of the record's noise. A single whose trace is below the noise (a flow limit the
+excitation never reaches) left nothing to find; the summary gives the share named right among
+those whose effect shows, beside the share of all.
 
     .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
         [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
@@ -56,7 +66,9 @@ sys.path.insert(0, str(ROOT / "tests"))     # the rig record generator the tests
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.effects import EFFECTS  # noqa: E402
+from sim_core.identification.calibration import estimated_ranges  # noqa: E402
 from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
+from sim_core.identification.metrics import noise_std  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
 
 GOALS = {"singles_right_pct": (">=", 95.0), "pairs_right_pct": (">=", 80.0), "clean_false_alarm_pct": ("<=", 0.0),
@@ -85,6 +97,7 @@ RANGES = {
     "sensor_gain": ("gain", 0.03, 0.08, "", False, True),               # 1 +- this
     "hysteresis": ("width", 0.3, 1.0, "", False, False),                # V
     "bulk_modulus": ("scale", 0.3, 0.65, "", True, False),
+    "valve_offset": ("offset", 0.05, 0.5, "", True, True),             # V, either side of the null
 }
 # pairs beyond the CONFUSIONS catalog: (effect, effect[, robot, joint])
 OTHER_PAIRS = [("deadband", "coulomb_friction", "harvester", "boom"), ("deadband", "delay"), ("deadband", "leakage"),
@@ -201,6 +214,33 @@ def effect_arg(name: str, joint: str | None, params: dict) -> str:
     return f"{name}:{body}" if body else name
 
 
+def _replace(args: list, flag: str, value) -> list:
+    """``args`` with the value after ``flag`` replaced."""
+    out = list(args)
+    i = out.index(flag)
+    out[i + 1] = value
+    return out
+
+
+def _strip_effects(args: list) -> list:
+    out, skip = [], False
+    for a in args:
+        if skip:
+            skip = False
+            continue
+        if a == "--effect":
+            skip = True
+            continue
+        out.append(a)
+    return out
+
+
+def _angle_rms_difference(a: Path, b: Path, joint: str) -> float:
+    """RMS difference (rad or m) of the joint's angle between two simulate outputs on one grid."""
+    ya, yb = (np.genfromtxt(f, delimiter=",", names=True)[f"q_{joint}"] for f in (a, b))
+    return float(np.sqrt(np.mean((ya - yb) ** 2)))
+
+
 # ---- records ------------------------------------------------------------------------------------------
 def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
     """Open-loop record of a built-in robot; returns (csv, robot to diagnose with, diagnose options)."""
@@ -235,6 +275,13 @@ def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
         q0 = float(spec.joint(joint).settings["initial_position"]) + case["start_offset"]
         args += ["--set", f"joints.{joint}.initial_position={q0!r}"]
     cli(*args)
+    if case["hidden"] and case["group"] == "singles":
+        # the hidden effect's trace: the noise-free truth with and without it
+        quiet = _replace(args, "--noise-angle", 0.0)
+        cli(*_replace(quiet, "--out", work / "trace_with.csv"))
+        cli(*_replace(_strip_effects(quiet), "--out", work / "trace_without.csv"))
+        case["trace_rms"] = _angle_rms_difference(work / "trace_with.csv", work / "trace_without.csv", joint)
+        case["trace_noise"] = float(case["noise"])
     postprocess(work / "measured.csv", joint, case.get("quantum"), case.get("mode_hz"))
     options = ["--initial-pose", "spec"] if any(n in SENSOR_EFFECTS for n, _, _ in case["hidden"]) else []
     return work / "measured.csv", robot, options
@@ -252,6 +299,14 @@ def rig_record(work: Path, case: dict) -> tuple[Path, str, list]:
     hidden = [(name, params) for name, _, params in case["hidden"]]
     rows, _ = closed_loop_record(rig, hidden=hidden[0] if hidden else None, off=off, seed=case["seed"],
                                  duration=60.0, start_offset=0.05 * span)
+    if hidden and case["group"] == "singles":
+        # the hidden effect's trace in closed loop (same seed: the same set points, jitter and noise)
+        rows0, _ = closed_loop_record(rig, hidden=None, off=off, seed=case["seed"], duration=60.0,
+                                      start_offset=0.05 * span)
+        n = min(len(rows), len(rows0))
+        a = float(spec.get(f"joints.{joint}.sensor.A"))
+        case["trace_rms"] = float(abs(a) * np.sqrt(np.mean((rows[:n, 1] - rows0[:n, 1]) ** 2)))
+        case["trace_noise"] = float(abs(a) * noise_std(rows[:, 1]))
     write_headerless(rows, work / "log.csv")
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
@@ -350,7 +405,17 @@ def run_case(case: dict, work: Path) -> dict:
     hidden = sorted((n, joint if j is not None else None) for n, j, _ in case["hidden"])
     out = {"id": case["id"], "group": case["group"], "verdict": d["verdict"], "named": named, "seconds": round(seconds, 1),
            "hidden": [(n, j, p) for n, j, p in case["hidden"]], "param_error_pct": None}
-    if case["group"] in ("singles", "pairs"):
+    if "trace_rms" in case:
+        out["trace_rms"], out["trace_noise"] = case["trace_rms"], case["trace_noise"]
+    finding = calibration_finding(d, case, robot, joint)
+    if finding is not None:
+        # the rig's spec marks this parameter estimated: the diagnosis calibrates it as a nuisance and
+        # does not offer it as a discrepancy; right when the calibration moved it, identified, towards the truth
+        out["calibration"] = finding
+        out["right"] = not named and finding["found"]
+        if out["right"]:
+            out["param_error_pct"] = finding["error_pct"]
+    elif case["group"] in ("singles", "pairs"):
         out["right"] = named == hidden
         if out["right"] and case["group"] == "singles":
             n, _, p = case["hidden"][0]
@@ -364,15 +429,44 @@ def run_case(case: dict, work: Path) -> dict:
     return out
 
 
+def calibration_finding(d: dict, case: dict, robot: str, joint: str) -> dict | None:
+    """For a single whose hidden parameter the robot's spec marks estimated: what the calibration made
+    of it. ``found``: identified and more than 3 sigma from its nominal value, on the truth's side."""
+    if case["group"] != "singles" or len(case["hidden"]) != 1:
+        return None
+    name, _, params = case["hidden"][0]
+    pname, truth = next(iter(params.items()))
+    key = f"effects.{name}.{joint}.{pname}"
+    if key not in estimated_ranges(load_robot(robot)):
+        return None
+    ch = next((c for c in d["calibration"]["changes"] if c["parameter"] == key), None)
+    if ch is None:
+        return {"parameter": key, "found": False, "why": "not freed"}
+    nominal, fitted, sigma = ch["nominal"], ch["fitted"], ch["sigma"]
+    moved = abs(fitted - nominal) > 3.0 * sigma
+    towards = (fitted - nominal) * (truth - nominal) > 0
+    return {"parameter": key, "nominal": nominal, "fitted": fitted, "sigma": sigma, "truth": truth,
+            "identified": bool(ch["identified"]), "found": bool(ch["identified"] and moved and towards),
+            "error_pct": round(100 * abs(fitted / truth - 1.0), 2) if truth else None}
+
+
+def visible_trace(r: dict) -> bool:
+    """The hidden effect moved the recorded angle by more than the record's noise (RMS)."""
+    return r["trace_rms"] > r["trace_noise"]
+
+
 def summary(rows: list[dict]) -> dict:
     def pct(sel, key="right"):
         return round(100 * sum(bool(r[key]) for r in sel) / len(sel), 1) if sel else None
     g = {k: [r for r in rows if r["group"] == k and "failed" not in r] for k in ("singles", "pairs", "clean", "out_of_bank")}
     errs = sorted(r["param_error_pct"] for r in g["singles"] if r.get("param_error_pct") is not None)
+    traced = [r for r in g["singles"] if "trace_rms" in r]
+    visible = [r for r in traced if visible_trace(r)]
     secs = sorted(r["seconds"] for r in rows if "seconds" in r)
     return {
         "cases": {k: len(v) for k, v in g.items()}, "failed": sum("failed" in r for r in rows),
         "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
+        "singles_traced": len(traced), "singles_visible": len(visible), "singles_visible_right_pct": pct(visible),
         "clean_false_alarm_pct": None if not g["clean"] else round(100 - pct(g["clean"]), 1),
         "out_of_bank_wrong_pct": None if not g["out_of_bank"] else round(100 - pct(g["out_of_bank"]), 1),
         "median_param_error_pct": errs[len(errs) // 2] if errs else None,
@@ -417,6 +511,10 @@ def main() -> int:
             continue
         named = ", ".join(f"{e}@{j}" for e, j in r["named"]) or r["verdict"]
         err = "" if r["param_error_pct"] is None else f" err {r['param_error_pct']:.1f} %"
+        if "trace_rms" in r:
+            err += f", trace {r['trace_rms'] / r['trace_noise']:.2g} x noise"
+        if "calibration" in r:
+            named = f"calibrated {r['calibration']['parameter']}" + (" (found)" if r["calibration"]["found"] else " (not found)")
         print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{err} ({r['seconds']:.0f} s)", flush=True)
     s = summary(rows)
     print(f"\ncases: {s['cases']}, failed to run: {s['failed']}")
@@ -431,6 +529,10 @@ def main() -> int:
             ok = v >= goal[1] if goal[0] == ">=" else v <= goal[1]
             mark = f"  goal {goal[0]} {goal[1]:g} %: {'met' if ok else 'NOT met'}"
         print(f"  {label:38s} {'-' if v is None else f'{v:.1f} %'}{mark}")
+    if s["singles_traced"]:
+        vr = s["singles_visible_right_pct"]
+        print(f"  {'singles whose effect shows above noise':38s} {s['singles_visible']} of {s['singles_traced']}, "
+              f"named right {'-' if vr is None else f'{vr:.1f} %'}")
     med = s["median_diagnose_s"]
     print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
     if args.json:

@@ -1,6 +1,6 @@
 """How ``hydrohil diagnose`` does on a user's own rig, over more cases than its tests run: every
 ``rig new`` template x every hidden effect of the "Your own rig" checks (deadband, valve asymmetry,
-Coulomb friction, leakage, delay) and a clean record, over several seeds.
+Coulomb friction, leakage, delay), a valve null offset and a clean record, over several seeds.
 
 Each case goes the user's way with the real commands: ``rig new TEMPLATE`` -> a record made in closed
 loop by the tests' generator (``tests/rig_records.py``: P control around the rig with its nominal
@@ -13,10 +13,10 @@ run being the clean records' false alarms. A wrong name that the report marks am
 hidden effect as its runner-up is counted apart (the report then says what would decide).
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
-        [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,none] [--seeds 1]
+        [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
         [--flow 1.2] [--supply 0.85] [--json FILE]
 
-About 25 s per case on this 2-core VM (18 cases per seed with the defaults).
+About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
 
 import argparse
@@ -44,7 +44,8 @@ def hidden_params(effect: str, spec, joint: str) -> dict | None:
     sc = actuator_scales(spec, joint)
     return {"deadband": {"width": 0.8}, "valve_asymmetry": {"ratio": 0.7}, "delay": {"delay": 0.06},
             "coulomb_friction": {"torque": 0.06 * sc["torque"]},
-            "leakage": {"internal": 0.04 * sc["q_full"] / spec.supply["pressure"]}, "none": None}[effect]
+            "leakage": {"internal": 0.04 * sc["q_full"] / spec.supply["pressure"]},
+            "valve_offset": {"offset": 0.25}, "none": None}[effect]
 
 
 def cli(*args) -> None:
@@ -95,7 +96,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--templates", default="cylinder,boom,rotary")
-    ap.add_argument("--effects", default="deadband,valve_asymmetry,coulomb_friction,leakage,delay,none")
+    ap.add_argument("--effects", default="deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none")
     ap.add_argument("--seeds", type=int, default=1, help="noise/excitation seeds per case (1..N)")
     ap.add_argument("--flow", type=float, default=1.2, help="the rig's valve flow against its spec (factor)")
     ap.add_argument("--supply", type=float, default=0.85, help="the rig's supply pressure against its spec (factor)")

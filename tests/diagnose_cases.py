@@ -44,6 +44,7 @@ CASES = [
     Case("sensor_offset", "hydrolek", "j2", [("sensor_offset", "j2", {"offset": (0.015, 0.035)})], sign={"offset": True},
          options=["--initial-pose", "spec"]),
     Case("hysteresis", "hydrolek", "j2", [("hysteresis", "j2", {"width": (0.4, 0.8)})]),
+    Case("valve_offset", "hydrolek", "j2", [("valve_offset", "j2", {"offset": (0.1, 0.4)})], sign={"offset": True}),
     Case("bulk_modulus", "hydrolek", "j2", [("bulk_modulus", None, {"scale": (0.3, 0.5)})]),
     Case("joint_compliance", "hydrolek", "j2", [("joint_compliance", "j2", {"frequency": (3.0, 6.0)})]),
     Case("sensor_gain", "hydrolek", "j3", [("sensor_gain", "j3", {"gain": (1.03, 1.06)})],

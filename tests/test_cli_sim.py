@@ -32,7 +32,7 @@ def test_effects_json_catalog(cli):
                  "payload", "sensor_offset", "sensor_gain", "hysteresis", "bulk_modulus"]
     # the research catalog's 16, in its order, and the effects added since (one file each)
     assert [n for n in names if n in catalog16] == catalog16
-    assert "stribeck_friction" in names and len(set(names)) == len(names) == 17
+    assert "stribeck_friction" in names and "valve_offset" in names and len(set(names)) == len(names) == 18
     for e in cat:
         assert e["description"] and e["citation"] and e["scope"] in ("per-joint", "global")
         assert e["parameters"]

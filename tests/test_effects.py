@@ -39,6 +39,22 @@ def test_deadband(arm):
     assert q_db == pytest.approx(q_eq, rel=0.02)
 
 
+def test_valve_offset(arm):
+    eff = [("valve_offset", "j2", {"offset": 0.5})]
+    const = lambda v: (lambda t: np.full_like(t, v))
+    # at zero command the joint creeps exactly as a nominal valve commanded with the offset
+    q0 = run_joint(arm, "j2", const(0.0), effects=eff)[1]
+    np.testing.assert_array_equal(q0, run_joint(arm, "j2", const(0.5))[1])
+    assert moved(q0) > 0.01
+    # commanding minus the offset holds the joint as a nominal valve at zero command does
+    np.testing.assert_array_equal(run_joint(arm, "j2", const(-0.5), effects=eff)[1], run_joint(arm, "j2", const(0.0))[1])
+    # the offset shifts the command before the spool overlap: with a 1 V deadband, +0.6 V (1.1 V at the
+    # spool) moves the joint and -0.6 V (-0.1 V) does not
+    both = eff + [("deadband", "j2", {"width": 1.0})]
+    assert moved(run_joint(arm, "j2", step(0.6), effects=both)[1]) > 0.01 * moved(run_joint(arm, "j2", step(0.6))[1])
+    assert moved(run_joint(arm, "j2", step(-0.6), effects=both)[1]) == 0.0
+
+
 def test_hysteresis(arm):
     pulse = step(4.0, 0.2, 0.7)
     q = run_joint(arm, "j2", pulse, effects=[("hysteresis", "j2", {"width": 0.8})], T=4.0)[1]

@@ -4,8 +4,8 @@ Each template rig is run under a P controller (the rig's own, tests/rig_records.
 operator-like steps; the truth has the valve 20 % larger and the supply 15 % lower than the written
 robot.toml says, starts 5 % of the stroke off the template's initial position, and is logged at
 50 Hz with jittered timestamps, the position in sensor volts and no pressures. Only the headerless
-log reaches the commands under test. A hidden deadband, valve asymmetry or delay is named with its
-parameter within 15 % on every template; a clean record is no_significant_discrepancy.
+log reaches the commands under test. A hidden deadband, valve asymmetry, delay or valve null offset
+is named with its parameter within 15 % on every template; a clean record is no_significant_discrepancy.
 """
 
 import json
@@ -21,7 +21,8 @@ from sim_core.model.spec import load_robot
 from sim_core.rigs import TEMPLATES
 
 OFF = {"valve.rated_flow": 1.2, "supply.pressure": 0.85}
-HIDDEN = {"deadband": ("width", 0.8), "valve_asymmetry": ("ratio", 0.7), "delay": ("delay", 0.06)}
+HIDDEN = {"deadband": ("width", 0.8), "valve_asymmetry": ("ratio", 0.7), "delay": ("delay", 0.06),
+          "valve_offset": ("offset", 0.25)}
 
 
 def _diagnose(cli, tmp_path, template, hidden, seed=5):

@@ -24,13 +24,14 @@ from .sensor_offset import SensorOffset
 from .spool_lag import SpoolLag
 from .stribeck_friction import StribeckFriction
 from .valve_asymmetry import ValveAsymmetry
+from .valve_offset import ValveOffset
 
 EFFECTS: dict[str, type[Effect]] = {
     e.name: e
     for e in (
         Deadband, ValveAsymmetry, SpoolLag, Delay, Leakage, CoulombFriction, Backlash, AreaRatio,
         FlowSaturation, LineDynamics, JointCompliance, Payload, SensorOffset, SensorGain, Hysteresis,
-        BulkModulus, StribeckFriction,
+        BulkModulus, StribeckFriction, ValveOffset,
     )
 }
 

@@ -45,7 +45,7 @@ class Effect:
     switch: ClassVar[bool] = True
     switch_column: ClassVar[int] = -1
     HOOKS: ClassVar[dict[str, str]] = {}
-    ORDER: ClassVar[int] = 0
+    ORDER: ClassVar[float] = 0
     CONFUSIONS: ClassVar[dict[str, str]] = {}
     MECHANISM: ClassVar[bool] = False  # changes masses or inertias: lowered before what depends on them
 
