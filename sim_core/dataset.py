@@ -179,7 +179,8 @@ def check_command_range(u: np.ndarray, joint, *, where: str, label: str, place, 
     if bad.size:
         r = int(bad[0]) + 1
         raise DatasetError(f"{where}column {label}: {place(r)}: {u[r - 1]:g} V is outside the joint's command range "
-                           f"[{lo:g}, {hi:g}] V{hint}")
+                           f"[{lo:g}, {hi:g}] V{hint}; if the valve's amplifier does take such commands, widen "
+                           f"joints.{joint.name}.cfp.command_range in the robot's spec")
 
 
 def input_matrix(ds: Dataset, spec, where: str = "") -> np.ndarray:

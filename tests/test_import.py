@@ -179,6 +179,8 @@ BAD = [
      "this joint has none"),
     ("command_unit_wrong", "boom_50hz_noheader.csv", ["--column", "time=0:ms", "--column", "u_j2=2:*1000"],
      "column u_j2 (column 2): row 1 (line 1): 7505 V is outside the joint's command range [-10, 10] V; check the unit"),
+    ("command_range_named", "boom_50hz_noheader.csv", ["--column", "time=0:ms", "--column", "u_j2=2:*1000"],
+     "widen joints.j2.cfp.command_range in the robot's spec"),
     ("time_and_rate", "boom_50hz_noheader.csv", ["--column", "time=0:ms", "--column", "u_j2=2", "--rate", "50"],
      "both a time column and --rate"),
     ("only_time", "boom_50hz_noheader.csv", ["--column", "time=0:ms"], "only a time column is mapped"),
