@@ -33,9 +33,10 @@ calibrated value), on the singles named right.
 
 Each single also gets its hidden effect's trace: the RMS difference of the recorded angle with and
 without the effect (noise-free truths for HydroLek; the same closed-loop seed for the rig), printed
-as a multiple of the record's noise. A single whose trace is below the noise (a flow limit the
-excitation never reaches) left nothing to find; the summary gives the share named right among
-those whose effect shows, beside the share of all.
+as a multiple of the record's noise; a pair gets its fainter member's (the truth with both against
+the truth without that one). A case whose trace is below the noise (a flow limit the excitation
+never reaches) left nothing to find; the summary gives the share right among those whose effects
+show, beside the share of all.
 
     .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
         [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
@@ -66,7 +67,6 @@ sys.path.insert(0, str(ROOT / "tests"))     # the rig record generator the tests
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.effects import EFFECTS  # noqa: E402
-from sim_core.identification.calibration import estimated_ranges  # noqa: E402
 from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
 from sim_core.identification.metrics import noise_std  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
@@ -222,13 +222,14 @@ def _replace(args: list, flag: str, value) -> list:
     return out
 
 
-def _strip_effects(args: list) -> list:
+def _strip_effects(args: list, name: str | None = None) -> list:
+    """``args`` without its ``--effect`` options (only those of effect ``name`` when given)."""
     out, skip = [], False
-    for a in args:
+    for i, a in enumerate(args):
         if skip:
             skip = False
             continue
-        if a == "--effect":
+        if a == "--effect" and (name is None or str(args[i + 1]).split(":")[0] == name):
             skip = True
             continue
         out.append(a)
@@ -275,12 +276,16 @@ def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
         q0 = float(spec.joint(joint).settings["initial_position"]) + case["start_offset"]
         args += ["--set", f"joints.{joint}.initial_position={q0!r}"]
     cli(*args)
-    if case["hidden"] and case["group"] == "singles":
-        # the hidden effect's trace: the noise-free truth with and without it
+    if case["hidden"] and case["group"] in ("singles", "pairs"):
+        # the hidden effects' trace: the noise-free truth with all of them and without each one (a
+        # pair's trace is that of its fainter member)
         quiet = _replace(args, "--noise-angle", 0.0)
         cli(*_replace(quiet, "--out", work / "trace_with.csv"))
-        cli(*_replace(_strip_effects(quiet), "--out", work / "trace_without.csv"))
-        case["trace_rms"] = _angle_rms_difference(work / "trace_with.csv", work / "trace_without.csv", joint)
+        traces = []
+        for name in dict.fromkeys(n for n, _, _ in case["hidden"]):
+            cli(*_replace(_strip_effects(quiet, name), "--out", work / "trace_without.csv"))
+            traces.append(_angle_rms_difference(work / "trace_with.csv", work / "trace_without.csv", joint))
+        case["trace_rms"] = min(traces)
         case["trace_noise"] = float(case["noise"])
     postprocess(work / "measured.csv", joint, case.get("quantum"), case.get("mode_hz"))
     options = ["--initial-pose", "spec"] if any(n in SENSOR_EFFECTS for n, _, _ in case["hidden"]) else []
@@ -407,7 +412,7 @@ def run_case(case: dict, work: Path) -> dict:
            "hidden": [(n, j, p) for n, j, p in case["hidden"]], "param_error_pct": None}
     if "trace_rms" in case:
         out["trace_rms"], out["trace_noise"] = case["trace_rms"], case["trace_noise"]
-    finding = calibration_finding(d, case, robot, joint)
+    finding = calibration_finding(d, case, joint)
     if finding is not None:
         # the rig's spec marks this parameter estimated: the diagnosis calibrates it as a nuisance and
         # does not offer it as a discrepancy; right when the calibration moved it, identified, towards the truth
@@ -417,6 +422,10 @@ def run_case(case: dict, work: Path) -> dict:
             out["param_error_pct"] = finding["error_pct"]
     elif case["group"] in ("singles", "pairs"):
         out["right"] = named == hidden
+        # a wrong name the report marks ambiguous, with a hidden effect as its runner-up (it then says
+        # what measurement would decide)
+        out["ambiguous_with_truth"] = (not out["right"]) and any(
+            s.get("ambiguous") and (s.get("runner_up") or {}).get("effect") in {n for n, _ in hidden} for s in d["selected"])
         if out["right"] and case["group"] == "singles":
             n, _, p = case["hidden"][0]
             key = next(iter(p))
@@ -429,7 +438,7 @@ def run_case(case: dict, work: Path) -> dict:
     return out
 
 
-def calibration_finding(d: dict, case: dict, robot: str, joint: str) -> dict | None:
+def calibration_finding(d: dict, case: dict, joint: str) -> dict | None:
     """For a single whose hidden parameter the robot's spec marks estimated: what the calibration made
     of it. ``found``: identified and more than 3 sigma from its nominal value, on the truth's side."""
     if case["group"] != "singles" or len(case["hidden"]) != 1:
@@ -437,11 +446,11 @@ def calibration_finding(d: dict, case: dict, robot: str, joint: str) -> dict | N
     name, _, params = case["hidden"][0]
     pname, truth = next(iter(params.items()))
     key = f"effects.{name}.{joint}.{pname}"
-    if key not in estimated_ranges(load_robot(robot)):
-        return None
-    ch = next((c for c in d["calibration"]["changes"] if c["parameter"] == key), None)
+    # estimated in the spec directly, or through the sensor model (A, B) that the effect stands for
+    ch = next((c for c in d["calibration"]["changes"]
+               if c["parameter"] == key and str(c.get("why", "")).startswith("estimated")), None)
     if ch is None:
-        return {"parameter": key, "found": False, "why": "not freed"}
+        return None
     nominal, fitted, sigma = ch["nominal"], ch["fitted"], ch["sigma"]
     moved = abs(fitted - nominal) > 3.0 * sigma
     towards = (fitted - nominal) * (truth - nominal) > 0
@@ -462,11 +471,16 @@ def summary(rows: list[dict]) -> dict:
     errs = sorted(r["param_error_pct"] for r in g["singles"] if r.get("param_error_pct") is not None)
     traced = [r for r in g["singles"] if "trace_rms" in r]
     visible = [r for r in traced if visible_trace(r)]
+    flagged = [r for r in g["singles"] + g["pairs"] if r.get("ambiguous_with_truth")]
+    traced_pairs = [r for r in g["pairs"] if "trace_rms" in r]
+    visible_pairs = [r for r in traced_pairs if visible_trace(r)]
     secs = sorted(r["seconds"] for r in rows if "seconds" in r)
     return {
         "cases": {k: len(v) for k, v in g.items()}, "failed": sum("failed" in r for r in rows),
         "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
         "singles_traced": len(traced), "singles_visible": len(visible), "singles_visible_right_pct": pct(visible),
+        "wrong_but_flagged_ambiguous_with_truth": len(flagged),
+        "pairs_traced": len(traced_pairs), "pairs_visible": len(visible_pairs), "pairs_visible_right_pct": pct(visible_pairs),
         "clean_false_alarm_pct": None if not g["clean"] else round(100 - pct(g["clean"]), 1),
         "out_of_bank_wrong_pct": None if not g["out_of_bank"] else round(100 - pct(g["out_of_bank"]), 1),
         "median_param_error_pct": errs[len(errs) // 2] if errs else None,
@@ -515,7 +529,8 @@ def main() -> int:
             err += f", trace {r['trace_rms'] / r['trace_noise']:.2g} x noise"
         if "calibration" in r:
             named = f"calibrated {r['calibration']['parameter']}" + (" (found)" if r["calibration"]["found"] else " (not found)")
-        print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{err} ({r['seconds']:.0f} s)", flush=True)
+        amb = " (ambiguous, the hidden effect runner-up)" if r.get("ambiguous_with_truth") else ""
+        print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{amb}{err} ({r['seconds']:.0f} s)", flush=True)
     s = summary(rows)
     print(f"\ncases: {s['cases']}, failed to run: {s['failed']}")
     labels = {"singles_right_pct": "singles named right", "pairs_right_pct": "pairs fully named",
@@ -533,6 +548,12 @@ def main() -> int:
         vr = s["singles_visible_right_pct"]
         print(f"  {'singles whose effect shows above noise':38s} {s['singles_visible']} of {s['singles_traced']}, "
               f"named right {'-' if vr is None else f'{vr:.1f} %'}")
+    if s["pairs_traced"]:
+        vr = s["pairs_visible_right_pct"]
+        print(f"  {'pairs whose both effects show':38s} {s['pairs_visible']} of {s['pairs_traced']}, "
+              f"fully named {'-' if vr is None else f'{vr:.1f} %'}")
+    print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
+          f"(the hidden effect is the runner-up)")
     med = s["median_diagnose_s"]
     print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
     if args.json:

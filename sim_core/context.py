@@ -24,9 +24,11 @@ HISTORY_CAPACITY = 8192  # command events kept for the delay line (0.8 s at 10 k
 
 
 class Context:
-    def __init__(self, plant, spec: RobotSpec | None = None, seed: int = 0):
+    def __init__(self, plant, spec: RobotSpec | None = None, seed: int = 0, *, owned: bool = False):
+        """``owned``: ``spec`` is the caller's private copy, which the context may keep (no copy)."""
         self.plant = plant
-        self.spec: RobotSpec = (spec or plant.spec).copy()
+        spec = spec or plant.spec
+        self.spec: RobotSpec = spec if owned else spec.copy()
         self.lowered: Lowered = lower(self.spec)
         n, na = self.spec.tree.n, len(self.spec.joints)
         self.XQ = np.zeros((2, n))

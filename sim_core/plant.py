@@ -62,7 +62,8 @@ class Plant:
             "passive_joints": list(self.spec.passive),
         }
 
-    def create_context(self, spec: RobotSpec | None = None, seed: int = 0):
+    def create_context(self, spec: RobotSpec | None = None, seed: int = 0, *, owned: bool = False):
+        """``owned``: ``spec`` is the caller's private copy (the context keeps it instead of copying)."""
         from .context import Context
 
-        return Context(self, spec, seed=seed)
+        return Context(self, spec, seed=seed, owned=owned)

@@ -64,7 +64,7 @@ class Runner:
             s.set("integrator.max_substep", self.substep)
         self.calls += 1
         try:
-            ctx = Plant(s).create_context(seed=0)
+            ctx = Plant(s).create_context(s, seed=0, owned=True)     # s is this call's own copy
             traj = Simulator(ctx).run(rec.time[:n], rec.U[:n])
         except (SimulationError, ValueError, ArithmeticError):
             return Outputs({}, {}, ok=False)
