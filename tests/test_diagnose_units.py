@@ -83,6 +83,15 @@ def test_bank_offers_every_applicable_effect(plants):
                 assert fp.lower <= v <= fp.upper
 
 
+def test_a_nominal_valve_offset_beyond_the_search_span_is_refitted_around_its_value(plants):
+    spec = plants("hydrolek").spec.copy()
+    spec.enable_effect("valve_offset", "j2", offset=-3.0)      # 2x the 1.5 V default bound of a +-10 V valve
+    c = next(c for c in bank(spec, ["j2"]) if c.effect == "valve_offset")
+    fp = c.free[0]
+    assert c.existing and fp.null == pytest.approx(-3.0) and fp.lower <= -3.0 <= fp.upper
+    assert all(fp.lower <= v <= fp.upper for (v,) in c.grid) and min(abs(v + 3.0) for (v,) in c.grid) < 0.5
+
+
 def test_parameter_file_round_trip(plants):
     base = plants("harvester").spec
     spec = base.copy()

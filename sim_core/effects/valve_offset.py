@@ -16,13 +16,13 @@ class ValveOffset(Effect):
     command, so the joint creeps one way, whatever the load, at the speed a command d would give; a
     command of -d holds it still. Under closed-loop control the controller holds -d at rest, and a
     model without the offset, driven by that recorded command, drifts the other way. Servo and
-    proportional valves are nulled at the factory to within 1-3 % of rated current and drift with
-    temperature, supply pressure and wear (null shift); amplifiers add their own bias.
+    proportional valves leave the factory nulled to within a few percent of rated current, and the
+    null drifts with temperature, supply pressure and wear (null shift); amplifiers add their own bias.
     """
 
     name = "valve_offset"
-    citation = (CITE_JELALI + " (§4.3, null shift of servo valves); H. E. Merritt, Hydraulic Control "
-                "Systems, Wiley, 1967 (§5.6, null shift)")
+    citation = (CITE_JELALI + " (servo-valve null shift); H. E. Merritt, Hydraulic Control Systems, Wiley, "
+                "1967 (valve null shift)")
     PARAMETERS = (Parameter("offset", "V", "command-equivalent shift of the valve's null (positive: flow "
                                            "as for a positive command)", 0.2, -5.0, 5.0),)
     HOOKS = {"command": "valve_offset_command"}
@@ -47,6 +47,8 @@ class ValveOffset(Effect):
     def candidate(cls, spec, joint, scales, guess, current):
         lo_u, hi_u = spec.joint(joint).command_range
         bound = SPAN * max(abs(lo_u), abs(hi_u))
+        if current is not None:          # a spec's own offset is refitted around its value, whatever its size
+            bound = max(bound, 1.5 * abs(current["offset"]))
         base = [0.02, 0.05, 0.1, 0.3, 0.7]
         if current is None:
             grid = [s * v * bound for v in base for s in (-1.0, 1.0)]
