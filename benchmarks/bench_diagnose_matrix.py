@@ -236,10 +236,14 @@ def _strip_effects(args: list, name: str | None = None) -> list:
     return out
 
 
+def _rms_difference(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
 def _angle_rms_difference(a: Path, b: Path, joint: str) -> float:
     """RMS difference (rad or m) of the joint's angle between two simulate outputs on one grid."""
     ya, yb = (np.genfromtxt(f, delimiter=",", names=True)[f"q_{joint}"] for f in (a, b))
-    return float(np.sqrt(np.mean((ya - yb) ** 2)))
+    return _rms_difference(ya, yb)
 
 
 # ---- records ------------------------------------------------------------------------------------------
@@ -310,7 +314,7 @@ def rig_record(work: Path, case: dict) -> tuple[Path, str, list]:
                                       start_offset=0.05 * span)
         n = min(len(rows), len(rows0))
         a = float(spec.get(f"joints.{joint}.sensor.A"))
-        case["trace_rms"] = float(abs(a) * np.sqrt(np.mean((rows[:n, 1] - rows0[:n, 1]) ** 2)))
+        case["trace_rms"] = abs(a) * _rms_difference(rows[:n, 1], rows0[:n, 1])
         case["trace_noise"] = float(abs(a) * noise_std(rows[:, 1]))
     write_headerless(rows, work / "log.csv")
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
@@ -329,7 +333,19 @@ def offered(spec, joint: str) -> list[tuple[str, str | None]]:
     return out
 
 
+GROUPS = ("singles", "pairs", "clean", "out_of_bank")
+ROBOTS = ("hydrolek", "rig")
+
+
 def build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
+    """The selected cases, each drawn as in the whole matrix: a single's magnitude and noise come from
+    its position in the full list, so ``--groups``/``--robots`` select cases without changing them
+    (``--robots`` selects the singles and clean records; pairs and out-of-bank cases name their own)."""
+    return [c for c in _build(seeds, set(GROUPS), set(ROBOTS))
+            if c["group"] in groups and (c["group"] in ("pairs", "out_of_bank") or c["robot"] in robots)]
+
+
+def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
     cases = []
     if "singles" in groups:
         if "hydrolek" in robots:
@@ -492,8 +508,8 @@ def summary(rows: list[dict]) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--groups", default="singles,pairs,clean,out_of_bank")
-    ap.add_argument("--robots", default="hydrolek,rig")
+    ap.add_argument("--groups", default=",".join(GROUPS))
+    ap.add_argument("--robots", default=",".join(ROBOTS))
     ap.add_argument("--only", help="run the cases whose id contains this text")
     ap.add_argument("--results", help="JSON-lines file of finished cases: appended to, and skipped on a re-run")
     ap.add_argument("--json", metavar="FILE", help="write the summary and every case as JSON")

@@ -218,7 +218,7 @@ class OperatorPanel:
                 except (LinkError, ValueError) as exc:
                     self.notify(str(exc), client=ev.client)
                     return
-            with self._lock:
+            with self._lock:   # and again once it went out: a state read while it was on its way predates it
                 self._touched[j] = time.monotonic()
                 if v != 0.0:
                     self._held[j] = v
