@@ -25,7 +25,11 @@ EMCY, HB, STATUS, ENGINE = (DB.get_message_by_name(n) for n in ("Emergency", "He
 
 
 class Listener:
-    """A stock python-can socketcand client that keeps every frame with its arrival time."""
+    """A stock python-can socketcand client that keeps every frame with the time the server sent it.
+
+    The server's stamp (socketcand's ``SEC.USEC``, taken when the bridge made the frame) and not the
+    arrival here: this test process is busy polling REST, so frames can reach it in a late burst.
+    """
 
     def __init__(self, port: int):
         self.bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="vcan0")
@@ -38,7 +42,7 @@ class Listener:
         while not self._stop.is_set():
             m = self.bus.recv(0.05)
             if m is not None:
-                self.frames.append((time.time(), m))
+                self.frames.append((m.timestamp, m))
 
     def decoded(self, message, since=0.0):
         return [(t, message.decode(m.data, decode_choices=False)) for t, m in list(self.frames)
