@@ -75,7 +75,7 @@ def run(args):
     finally:
         if backend is not None:
             backend.close()
-    paths = report.write(d, args.report, spec, fmt=args.format)
+    paths = report.write(d, args.report, spec, fmt=args.format, workers=args.workers)
     print(f"{d.verdict}: {args.data} on {spec.name} ({d.timings.get('total', 0):.1f} s)")
     for s in d.selected:
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())

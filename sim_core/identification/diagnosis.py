@@ -39,6 +39,7 @@ from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         free_list, model_with, select, without)
 from .signatures import joint_signatures, public
+from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
 
 
@@ -268,22 +269,27 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the fast optimum: the fast substep was checked to move the fits by < 0.25 points and biases the
     # parameters by about 1 %); the baseline keeps its calibration and is re-simulated at the default
     base_acc = base_fast
+    with SideBySide(workers if backend is None else 1) as side:
+        def refit(model, chosen):
+            free = free_list(model, None, [(e.candidate, e.effect_params()) for e in chosen], keys)
+            return oe.fit(accurate, est, model, free, max_sims=2 * (len(free) + 1) + 1, tol=1e-3, side=side)
 
-    def refit(model, chosen):
-        free = free_list(model, None, [(e.candidate, e.effect_params()) for e in chosen], keys)
-        return oe.fit(accurate, est, model, free, max_sims=2 * (len(free) + 1) + 1, tol=1e-3)
-
-    # every named effect must still be worth the threshold in the final model: removing it (nothing
-    # refitted, so the cost is if anything overstated) must lose THRESHOLD_POINTS on the validation
-    # data. A greedy pick whose gain came from refitting the others is dropped here.
-    chosen, final = final_check(sel.accepted, sel.model, refit=refit,
-                                worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob),
-                                remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate), log=log)
+        # every named effect must still be worth the threshold in the final model: removing it (nothing
+        # refitted, so the cost is if anything overstated) must lose THRESHOLD_POINTS on the validation
+        # data. A greedy pick whose gain came from refitting the others is dropped here.
+        kept: dict = {}
+        chosen, final = final_check(
+            sel.accepted, sel.model, refit=refit, log=log,
+            worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept),
+            remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate))
     ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]
-    base_out = vaccurate.simulate(base_acc, vprob.n)
-    ext_out = vaccurate.simulate(ext_acc, vprob.n) if accepted else base_out
+    base_out = kept["base"] if "base" in kept else vaccurate.simulate(base_acc, vprob.n)
+    if not accepted:
+        ext_out = base_out
+    else:
+        ext_out = kept["out"] if kept.get("model") is ext_acc else vaccurate.simulate(ext_acc, vprob.n)
     base_fits = _fits_all(vprob, base_out, vrec, split)
     ext_fits = _fits_all(vprob, ext_out, vrec, split)
     timings["final"] = time.perf_counter() - t_start
@@ -392,13 +398,21 @@ def _pct(v: float):
     return None if v is None or not math.isfinite(v) else round(float(v), 1)
 
 
-def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, prob: oe.Problem) -> list[float]:
+def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, prob: oe.Problem, side: SideBySide,
+                   kept: dict) -> list[float]:
     """Validation score (points) each chosen effect is worth in ``model``: the score with it minus
-    the score with it removed, on the joints it acts on."""
-    full = prob.fits(runner.simulate(model, prob.n))
+    the score with it removed, on the joints it acts on. The simulations run side by side, with the
+    baseline's on the first call; ``kept`` keeps the baseline's output ("base") and the model's
+    ("model", "out") for the report."""
+    specs = [model] + [without(base_spec, model, ev.candidate) for ev in chosen]
+    outs = side.simulate(runner, specs + ([] if "base" in kept else [base_spec]), prob.n)
+    if "base" not in kept:
+        kept["base"] = outs.pop()
+    kept["model"], kept["out"] = model, outs[0]
+    full = prob.fits(outs[0])
     worth = []
-    for ev in chosen:
-        less = prob.fits(runner.simulate(without(base_spec, model, ev.candidate), prob.n))
+    for ev, out in zip(chosen, outs[1:]):
+        less = prob.fits(out)
         joints = affected_joints(ev.candidate, prob.joints)
         drop = float(np.mean([full[j]["score"] - less[j]["score"] for j in joints]))
         worth.append(drop if math.isfinite(drop) else math.inf)

@@ -22,6 +22,7 @@ from .record import Record
 from .simulation import Outputs, Runner
 
 PRESSURE_WEIGHT = 0.5      # each of p_a, p_b: together they weigh as much as the angle
+DIFF_STEP = 1e-3           # least_squares' relative finite-difference step in the fit coordinate
 FAIL_RESIDUAL = 10.0       # normalised residual of a simulation that failed (far worse than any fit)
 
 
@@ -163,6 +164,22 @@ class _Budget(Exception):
     pass
 
 
+def forward_steps(x: np.ndarray, rel: float, lower: float = 0.0, upper: float = 1.0) -> np.ndarray:
+    """The forward-difference steps scipy's least_squares takes for ``diff_step=rel`` within
+    [lower, upper]: ``rel |x|`` (sqrt(eps) where that vanishes), turned inward at a bound, shortened to
+    the room left where neither direction fits."""
+    sign = np.where(x >= 0, 1.0, -1.0)
+    h = rel * sign * np.abs(x)
+    h = np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)), h)
+    lo, hi = x - lower, upper - x
+    xh = x + h
+    fitting = np.abs(h) <= np.maximum(lo, hi)
+    h = np.where(((xh < lower) | (xh > upper)) & fitting, -h, h)
+    h = np.where(~fitting & (hi >= lo), hi, h)
+    h = np.where(~fitting & (hi < lo), -lo, h)
+    return h
+
+
 def _spec_at(spec, free, x):
     s = spec.copy()
     for fp, xi in zip(free, x):
@@ -172,12 +189,13 @@ def _spec_at(spec, free, x):
 
 def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, grid: list[list[float]] | None = None,
         grid_problem: Problem | None = None, max_sims: int = 60, uncertainty: bool = True,
-        tol: float = 1e-4) -> FitResult:
+        tol: float = 1e-4, side=None) -> FitResult:
     """Fit the values of ``free`` in ``spec`` (a model spec) to the problem's channels.
 
     ``grid``: starting points (physical values, one list per point, in ``free``'s order), ranked on
     ``grid_problem`` (default: the problem itself; a shorter window is cheaper) by the
-    flow-gain-profiled cost; the current values are a starting point too."""
+    flow-gain-profiled cost; the current values are a starting point too. ``side``
+    (:class:`.side_by_side.SideBySide`): where the uncertainty's Jacobian columns run."""
     spec = spec.copy()
     x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
     sims = [0]
@@ -185,6 +203,15 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
 
     def spec_at(x):
         return _spec_at(spec, free, x)
+
+    last: dict = {}
+
+    def scored(x, out):
+        r = problem.residuals(out)
+        c = float(r @ r)
+        if c < best["cost"]:
+            best.update(cost=c, x=np.array(x, dtype=float), r=r)
+        return r
 
     def resid(x):
         if sims[0] >= max_sims:
@@ -194,11 +221,35 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             s = spec_at(x)
         except ValueError:
             return np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
-        r = problem.residuals(runner.simulate(s, problem.n, owned=True))
-        c = float(r @ r)
-        if c < best["cost"]:
-            best.update(cost=c, x=np.array(x, dtype=float), r=r)
+        r = scored(x, runner.simulate(s, problem.n, owned=True))
+        last.update(x=np.array(x, dtype=float), r=r)
         return r
+
+    def jacobian(x):
+        """least_squares' forward differences ('2-point', relative step DIFF_STEP, one-sided inside
+        the bounds), the columns simulated side by side; the budget and the best point as resid's."""
+        x = np.asarray(x, dtype=float)
+        f0 = last["r"] if "r" in last and np.array_equal(last["x"], x) else resid(x)
+        h = forward_steps(x, DIFF_STEP)
+        cols = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
+        budget = max_sims - sims[0]
+        todo = cols[:budget]
+        sims[0] += len(todo)
+        specs, ok = [], []
+        for xi in todo:
+            try:
+                specs.append(spec_at(xi))
+                ok.append(True)
+            except ValueError:
+                ok.append(False)
+        outs = iter(side.simulate(runner, specs, problem.n))
+        J = np.empty((f0.size, x.size))
+        for i, (xi, good) in enumerate(zip(todo, ok)):
+            r = scored(xi, next(outs)) if good else np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
+            J[:, i] = (r - f0) / (xi[i] - x[i])
+        if len(todo) < len(cols):
+            raise _Budget
+        return J
 
     starts = [np.array([fp.to_x(v) for fp, v in zip(free, point)]) for point in grid or []]
     try:
@@ -228,7 +279,8 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         else:
             x_start = x0
         if free:
-            least_squares(resid, x_start, bounds=(0.0, 1.0), method="trf", diff_step=1e-3, x_scale=1.0,
+            least_squares(resid, x_start, jac=jacobian if side is not None and len(free) > 1 else "2-point",
+                          bounds=(0.0, 1.0), method="trf", diff_step=DIFF_STEP, x_scale=1.0,
                           ftol=tol, xtol=tol, gtol=1e-8)
         else:
             resid(x0)
@@ -241,24 +293,33 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         out.ok = False
         return out
     if uncertainty and free:
-        add_uncertainty(out, runner, problem)
+        add_uncertainty(out, runner, problem, side)
     return out
 
 
-def add_uncertainty(out: FitResult, runner, problem) -> None:
+def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
     """Forward-difference Jacobian at the optimum (steps of 1e-3 of the search range, pushed inward
-    at the bounds) and the covariance ``s^2 (J'J)^-1 N/N_eff`` mapped to physical units."""
+    at the bounds; the columns side by side when ``side`` is given) and the covariance
+    ``s^2 (J'J)^-1 N/N_eff`` mapped to physical units."""
     x, r0 = out.x, out.residual
     if x is None or r0 is None or not out.free:
         return
     k = x.size
     J = np.zeros((r0.size, k))
+    steps, specs = [], []
     for i in range(k):
         h = 1e-3 if x[i] + 1e-3 <= 1.0 else -1e-3
         xp = x.copy()
         xp[i] += h
-        out.sims += 1
-        J[:, i] = (problem.residuals(runner.simulate(_spec_at(out.start_spec, out.free, xp), problem.n, owned=True)) - r0) / h
+        steps.append(h)
+        specs.append(_spec_at(out.start_spec, out.free, xp))
+    out.sims += k
+    if side is not None:
+        outs = side.simulate(runner, specs, problem.n)
+    else:
+        outs = [runner.simulate(s, problem.n, owned=True) for s in specs]
+    for i, (h, o) in enumerate(zip(steps, outs)):
+        J[:, i] = (problem.residuals(o) - r0) / h
     m = r0.size
     dof = max(m - k, 1)
     s2 = float(r0 @ r0) / dof
