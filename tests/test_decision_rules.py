@@ -192,13 +192,31 @@ def test_pairs_are_ranked_by_the_sum_of_single_gains_without_duplicates_or_diver
     pairs = dc.rank_pairs(evs)
     labels = [(a.candidate.label, b.candidate.label) for a, b in pairs]
     assert labels[0] == (A.label, C.label)               # 2.5
+    # every scored estimation fit equal: the gain order alone, best first
     assert [round(a.gain + b.gain, 2) for a, b in pairs] == sorted((round(a.gain + b.gain, 2) for a, b in pairs),
                                                                    reverse=True)
     assert all(a.key != b.key for a, b in pairs) and all(D.label not in lbl for lbl in labels)
+    assert len(set(labels)) == len(labels)
     many = [scored(cand("deadband", f"j{i}"), gain=float(i)) for i in range(10)]
     assert len(dc.rank_pairs(many)) == dc.MAX_PAIRS == 15 and len(dc.rank_pairs(many, 3)) == 3
     top = dc.rank_pairs(many, 1)[0]
     assert {top[0].candidate.joint, top[1].candidate.joint} == {"j9", "j8"}
+
+
+def test_a_pair_whose_members_lose_alone_on_validation_but_fit_the_estimation_data_is_tried():
+    """Two effects that cause a drift together: each alone explains much of the estimation data
+    (BIC far down) and extrapolates the drift wrongly on the validation part (gain far below zero).
+    Ranked by validation gains only, eight better-looking pairs of small movers would take every slot."""
+    movers = [scored(cand("delay", f"j{i}"), gain=0.5, bic=-5.0) for i in range(8)]
+    hyst, leak = cand("hysteresis"), cand("leakage")
+    masked = [scored(hyst, gain=-6.0, bic=-8000.0), scored(leak, gain=-20.0, bic=-4000.0)]
+    pairs = dc.rank_pairs(movers + masked)
+    labels = [{a.candidate.label, b.candidate.label} for a, b in pairs]
+    assert {hyst.label, leak.label} in labels[:2]          # the fit order's first, on its first turn
+    assert labels[0] <= {m.candidate.label for m in movers}   # the gain order's first
+    gain_only = sorted(((a, b) for i, a in enumerate(movers + masked) for b in (movers + masked)[i + 1:]),
+                       key=lambda p: -(p[0].gain + p[1].gain))[:dc.MAX_PAIRS]
+    assert {hyst.label, leak.label} not in [{a.candidate.label, b.candidate.label} for a, b in gain_only]
 
 
 def test_a_pair_passes_only_when_each_member_is_identified():

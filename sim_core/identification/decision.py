@@ -14,8 +14,8 @@ The rules, in the order they apply:
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
   when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
 * masked pairs (:func:`rank_pairs`, :func:`forward`): when no single candidate passes but the model's
-  residual tests fail, the most promising pairs (by the sum of their single gains, at most 15) are
-  fitted jointly; a pair that passes (each member identified) joins as two effects named together;
+  residual tests fail, the most promising pairs (by the sum of their single validation gains and,
+  taking turns, by the sum of their estimation-fit improvements; at most 15) are fitted jointly; a pair that passes (each member identified) joins as two effects named together;
 * backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
   less than 2 points is dropped (an early pick can stand in for effects named later); a pair named
   together is removed together (each alone is absorbed by the refit, by definition);
@@ -175,14 +175,30 @@ class Forward:
 
 
 def rank_pairs(evals: list[Evaluation], max_pairs: int = MAX_PAIRS) -> list[tuple[Evaluation, Evaluation]]:
-    """The pairs of a round's single candidates worth fitting jointly, most promising first: by the sum
-    of their single gains (a masked effect still moves the fit a little; one absorbed by the
-    calibration gains about nothing, one cancelled by its partner may lose). Two candidates of the
-    same effect and joint, or one whose fit diverged, make no pair. At most ``max_pairs``."""
+    """The pairs of a round's single candidates worth fitting jointly, most promising first. Two orders
+    take turns: by the sum of the members' single validation gains (a masked effect still moves the
+    fit a little; one absorbed by the calibration gains about nothing, one cancelled by its partner
+    may lose), and by the sum of their improvements of the estimation fit (``bic_delta``): alone, a
+    member of a pair can explain much of the estimation data and still lose on the validation part,
+    where the share it cannot explain without its partner (a drift that two effects cause together)
+    carries it off. Two candidates of the same effect and joint, or one whose fit diverged, make no
+    pair. At most ``max_pairs``."""
     ok = [e for e in evals if math.isfinite(e.gain)]
     pairs = [(a, b) for i, a in enumerate(ok) for b in ok[i + 1:] if a.key != b.key]
-    pairs.sort(key=lambda p: -(p[0].gain + p[1].gain))
-    return pairs[:max_pairs]
+    by_gain = sorted(pairs, key=lambda p: -(p[0].gain + p[1].gain))
+
+    def fit_gain(p):       # ties (equal fits) in the gain order
+        return (sum(e.bic_delta if math.isfinite(e.bic_delta) else math.inf for e in p), -(p[0].gain + p[1].gain))
+
+    by_fit = sorted(pairs, key=fit_gain)
+    out: list[tuple[Evaluation, Evaluation]] = []
+    seen: set[tuple[int, int]] = set()
+    for turn in zip(by_gain, by_fit):
+        for p in turn:
+            if (id(p[0]), id(p[1])) not in seen:
+                seen.add((id(p[0]), id(p[1])))
+                out.append(p)
+    return out[:max_pairs]
 
 
 def member_evaluations(pair_ev: Evaluation) -> list[Evaluation]:
