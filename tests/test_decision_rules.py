@@ -281,6 +281,43 @@ def test_no_pair_passing_names_nothing_and_says_how_many_were_tried():
     assert len(fw.pairs) == 1 and not any(e.accepted_ok for e in fw.pairs[0])
 
 
+def test_the_pair_search_skipped_at_the_ceiling_runs_once_the_final_check_drops_the_effect_that_stopped_it():
+    """The deadband passes alone by a hair, the model comes within 2 points of its ceiling, the search
+    stops; the final check drops the deadband. The pairs of its round (itself among them) are then
+    fitted on the model without it, under forward's conditions."""
+    near = {frozenset(): 96.0, frozenset({A.label}): 98.5}
+    table = {(E, A.label): (2.2, -50.0), (E, B.label): (1.9, -40.0), (E, C.label): (0.1, -1.0)}
+    fw, _ = run_forward(table, score=lambda m: near[frozenset(m)], ceiling=100.0)
+    assert [e.candidate.label for e in fw.accepted] == [A.label] and fw.at_ceiling
+    asked = []
+
+    def evaluate_pairs(pairs, model, accepted, r):
+        asked.append((model, [c.label for c, _ in accepted], r, [{a.candidate.label, b.candidate.label} for a, b in pairs]))
+        return [judged(scored_pair(a.candidate, b.candidate, gain=5.0 if {a.candidate.label, b.candidate.label}
+                                   == {A.label, B.label} else 0.5)) for a, b in pairs]
+
+    def after(dropped, kept=(), score=96.0, misfit=True, stopped_at_ceiling=True):
+        asked.clear()
+        fw.at_ceiling = stopped_at_ceiling
+        return dc.pairs_after_a_drop(list(kept), dropped, fw, E, evaluate_pairs=evaluate_pairs,
+                                     score=lambda m: score, ceiling=100.0, misfit=lambda m: misfit)
+
+    pevals, best = after(fw.accepted)
+    assert best is not None and {m.label for m in best.candidate.members} == {A.label, B.label}
+    assert len(asked) == 1 and asked[0][0] == E and asked[0][2] == 1 and {A.label, B.label} in asked[0][3]
+    assert len(pevals) == 3
+    # forward's conditions: not after a stop for another reason, nothing dropped, the reduced model at
+    # its ceiling, a white residual, no room for two more
+    assert after(fw.accepted, stopped_at_ceiling=False) == ([], None) and not asked
+    assert after([]) == ([], None) and not asked
+    assert after(fw.accepted, score=98.5) == ([], None) and not asked
+    assert after(fw.accepted, misfit=False) == ([], None) and not asked
+    assert after(fw.accepted, kept=[scored(C), scored(cand("hysteresis"))]) == ([], None) and not asked
+    # an effect the final check kept is not offered again in a pair
+    pevals, _ = after(fw.accepted, kept=[fw.rounds[0][1]])
+    assert all(B.label not in p for p in asked[0][3]) and asked[0][1] == [B.label]
+
+
 # ---- backward pass and final check ----------------------------------------------------------------
 def test_backward_drops_a_stand_in_and_rescores_after_each_drop():
     evs = [scored(A), scored(B), scored(C)]

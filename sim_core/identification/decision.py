@@ -20,7 +20,9 @@ The rules, in the order they apply:
   less than 2 points is dropped (an early pick can stand in for effects named later); a pair named
   together is removed together (each alone is absorbed by the refit, by definition);
 * final check (:func:`final_check`): in the refitted final model each named effect must still be
-  worth 2 points, else the weakest is dropped and the rest refitted;
+  worth 2 points, else the weakest is dropped and the rest refitted; when the search had stopped
+  near the noise ceiling because of a dropped effect, the pair search it skipped runs then
+  (:func:`pairs_after_a_drop`), and a passing pair goes through the final check in turn;
 * ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
   the choice ambiguous, with the measurement that would decide (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
@@ -172,6 +174,7 @@ class Forward:
     model: Any
     stopped: str
     pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
+    at_ceiling: bool = False                  # stopped because the model came within the threshold of its ceiling
 
 
 def rank_pairs(evals: list[Evaluation], max_pairs: int = MAX_PAIRS) -> list[tuple[Evaluation, Evaluation]]:
@@ -234,11 +237,13 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
     pairs_tried: list[list[Evaluation]] = []
     pool = list(cands)
     stopped = "no candidate passed"
+    at_ceiling = False
     for r in range(1, max_effects + 1):
         if r > 1:
             s = score(model)
             if near_ceiling(s, ceiling):
                 stopped = f"score {s:.1f} within {THRESHOLD_POINTS:g} points of its noise ceiling {ceiling:.1f}"
+                at_ceiling = True
                 break
         if not pool:
             stopped = "no candidates left"
@@ -273,7 +278,31 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         if len(accepted) >= max_effects:      # a pair can reach the limit before its round count does
             stopped = f"reached {max_effects} effects"
             break
-    return Forward(accepted, rounds, model, stopped, pairs_tried)
+    return Forward(accepted, rounds, model, stopped, pairs_tried, at_ceiling)
+
+
+def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
+                       evaluate_pairs: Callable | None, score: Callable, ceiling: float, misfit: Callable | None = None,
+                       max_effects: int = MAX_EFFECTS, log=None) -> tuple[list[Evaluation], Evaluation | None]:
+    """The pair search that forward selection skipped because an effect brought the model within the
+    threshold of its noise ceiling, run once the final check has dropped that effect (the reason to
+    stop is gone with it). ``model``: the search's model without the dropped effects, ``kept``: what the
+    final check kept. The pairs come from the round the first dropped effect joined in, the dropped
+    one among them (not worth the threshold alone, it may be with a partner), under the same
+    conditions as in :func:`forward` (the model not near its ceiling, its residual tests failing,
+    room for two more). Returns the pair evaluations and the passing pair's evaluation (or None)."""
+    log = log or (lambda msg: None)
+    if (not dropped or not fw.at_ceiling or evaluate_pairs is None or len(kept) + 2 > max_effects
+            or near_ceiling(score(model), ceiling) or (misfit is not None and not misfit(model))):
+        return [], None
+    r = min(ev.round for ev in dropped)
+    taken = {e.key for e in kept}
+    pairs = [p for p in rank_pairs(fw.rounds[r - 1]) if p[0].key not in taken and p[1].key not in taken]
+    if not pairs:
+        return [], None
+    log(f"the final check dropped {', '.join(e.candidate.label for e in dropped)}: fitting {len(pairs)} pairs")
+    pevals = evaluate_pairs(pairs, model, [(e.candidate, e.effect_params()) for e in kept], r)
+    return pevals, best_passing(pevals)
 
 
 # ---- backward pass and final check ----------------------------------------------------------------------

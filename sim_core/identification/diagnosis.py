@@ -278,10 +278,19 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # refitted, so the cost is if anything overstated) must lose THRESHOLD_POINTS on the validation
         # data. A greedy pick whose gain came from refitting the others is dropped here.
         kept: dict = {}
-        chosen, final = final_check(
-            sel.accepted, sel.model, refit=refit, log=log,
-            worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept),
-            remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate))
+
+        def checked(accepted, model):
+            return final_check(
+                accepted, model, refit=refit, log=log,
+                worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept),
+                remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate))
+
+        chosen, final = checked(sel.accepted, sel.model)
+        dropped = [e for e in sel.accepted if e not in chosen]
+        again = sel.resume(chosen, dropped) if dropped and sel.resume is not None else None
+        if again is not None:          # a pair passed where the search had stopped for a dropped effect
+            sel.accepted = again[0]
+            chosen, final = checked(*again)
     ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]

@@ -27,6 +27,7 @@ import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,7 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, forward, judge)
+                       backward as _backward, forward, judge, member_evaluations, pairs_after_a_drop)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .record import Record
@@ -301,6 +302,8 @@ class Selection:
     stopped: str
     ceiling: float
     pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
+    # (kept, dropped) after the final check -> (accepted, fast model) with a pair that passes, or None
+    resume: Callable | None = None
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
@@ -341,7 +344,30 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    return Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs)
+    sel = Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs)
+
+    def resume(kept, dropped):
+        """decision.pairs_after_a_drop on the search's model without the dropped effects."""
+        reduced = model
+        for ev in dropped:
+            reduced = without(base_spec, reduced, (ev.pair or ev).candidate)
+        pevals, best = pairs_after_a_drop(
+            kept, dropped, fw, reduced, evaluate_pairs=None if misfit is None else evaluate_pairs, score=base.score,
+            ceiling=ceiling, misfit=None if misfit is None else (lambda m: misfit(base.outputs(m))),
+            max_effects=max_effects, log=log)
+        if not pevals:
+            return None
+        sel.pairs.append(pevals)
+        labels = ", ".join(e.candidate.label for e in dropped)
+        if best is None:
+            sel.stopped += f"; the final check dropped {labels}, and none of {len(pevals)} pairs passed"
+            return None
+        sel.stopped += f"; the final check dropped {labels}, then the pair {best.candidate.label} passed"
+        log(f"accepted the pair {best.candidate.label} ({best.gain:+.2f} points) after the final check")
+        return list(kept) + member_evaluations(best), _extend(reduced, best, recalibrate)
+
+    sel.resume = resume
+    return sel
 
 
 def _extend(model, ev: Evaluation, recalibrate):
