@@ -37,7 +37,7 @@ from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
-                        free_list, model_with, select, without)
+                        free_list, select, without)
 from .signatures import joint_signatures, public
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
