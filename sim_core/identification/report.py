@@ -117,13 +117,16 @@ def _figure(d: Diagnosis, joint: str, name: str) -> str:
     return _DRAW[name](_pyplot(), d, joint)
 
 
+def _traces(d: Diagnosis, joint: str):
+    """The validation record and the joint's measured, baseline and extended angles (None where absent)."""
+    rec = d.validation
+    return rec, rec.angles[joint], d.baseline_out.angles.get(joint), d.extended_out.angles.get(joint)
+
+
 def _fig_angles(plt, d: Diagnosis, joint: str) -> str:
     """Measured vs baseline vs extended angle, the validation part shaded."""
-    rec = d.validation
+    rec, y, yb, ye = _traces(d, joint)
     t = rec.time
-    y = rec.angles[joint]
-    yb = d.baseline_out.angles.get(joint)
-    ye = d.extended_out.angles.get(joint)
     t_val = t[d.split]
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(t, y, "k", lw=0.8, label="measured")
@@ -140,11 +143,8 @@ def _fig_angles(plt, d: Diagnosis, joint: str) -> str:
 
 def _fig_residuals(plt, d: Diagnosis, joint: str) -> str:
     """Angle residuals with the evidence of the named effect highlighted."""
-    rec = d.validation
+    rec, y, yb, ye = _traces(d, joint)
     t = rec.time
-    y = rec.angles[joint]
-    yb = d.baseline_out.angles.get(joint)
-    ye = d.extended_out.angles.get(joint)
     t_val = t[d.split]
     fig, ax = plt.subplots(figsize=(10, 3.0))
     if yb is not None:
@@ -170,10 +170,7 @@ def _fig_correlation(plt, d: Diagnosis, joint: str) -> str:
     """Velocity residual autocorrelation and the cross-correlations with the input, with their bands."""
     from .metrics import velocity
 
-    rec = d.validation
-    y = rec.angles[joint]
-    yb = d.baseline_out.angles.get(joint)
-    ye = d.extended_out.angles.get(joint)
+    rec, y, yb, ye = _traces(d, joint)
     tests = d.tests
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.0))
     for state, color in (("baseline", "tab:red"), ("extended", "tab:blue")):
