@@ -287,7 +287,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
         chosen, final = checked(sel.accepted, sel.model)
         dropped = [e for e in sel.accepted if e not in chosen]
-        again = sel.resume(chosen, dropped) if dropped and sel.resume is not None else None
+        again = sel.resume(chosen, dropped) if sel.resume is not None else None
         if again is not None:          # a pair passed where the search had stopped for a dropped effect
             sel.accepted = again[0]
             chosen, final = checked(*again)

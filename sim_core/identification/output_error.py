@@ -206,6 +206,9 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
 
     last: dict = {}
 
+    def failed():          # the residual of a model spec_at refuses
+        return np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
+
     def scored(x, out):
         r = problem.residuals(out)
         c = float(r @ r)
@@ -220,7 +223,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         try:
             s = spec_at(x)
         except ValueError:
-            return np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
+            return failed()
         r = scored(x, runner.simulate(s, problem.n, owned=True))
         last.update(x=np.array(x, dtype=float), r=r)
         return r
@@ -245,7 +248,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         outs = iter(side.simulate(runner, specs, problem.n))
         J = np.empty((f0.size, x.size))
         for i, (xi, good) in enumerate(zip(todo, ok)):
-            r = scored(xi, next(outs)) if good else np.full(problem.size, FAIL_RESIDUAL / math.sqrt(problem.size))
+            r = scored(xi, next(outs)) if good else failed()
             J[:, i] = (r - f0) / (xi[i] - x[i])
         if len(todo) < len(cols):
             raise _Budget

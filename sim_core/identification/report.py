@@ -22,6 +22,7 @@ from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
 from .record import start_position
 from .residual_tests import autocorrelation
+from .side_by_side import SideBySide
 
 # where each effect typically shows (the legend of the highlighted evidence)
 EVIDENCE = {
@@ -75,25 +76,17 @@ def all_plots(d: Diagnosis, joints: list[str], workers: int = 0) -> dict[str, di
     """Every figure of every joint, drawn side by side in forked processes (Agg drawing is single-threaded
     and a report's figures are independent: about half the time on two cores); ``workers`` 0: the CPU
     count, 1: here."""
-    import multiprocessing
-    import os
-    from concurrent.futures import ProcessPoolExecutor
-
     jobs = [(j, name) for j in joints for name in FIGURES]
-    workers = min(len(jobs), workers or len(os.sched_getaffinity(0)))
-    out: dict[str, dict[str, str]] = {j: {} for j in joints}
-    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        for j, name in jobs:
-            out[j][name] = _figure(d, j, name)
-        return out
-    _pyplot()                      # imported once, before the fork: the children inherit it
-    _FORKED["diagnosis"] = d
+    _pyplot()                      # imported once, before any fork: the children inherit it
+    _FORKED["diagnosis"] = d       # inherited by the forked children, not pickled with every job
     try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            for (j, name), png in zip(jobs, pool.map(_forked_figure, jobs)):
-                out[j][name] = png
+        with SideBySide(workers) as side:
+            pngs = side.map(_forked_figure, jobs)
     finally:
         _FORKED.clear()
+    out: dict[str, dict[str, str]] = {j: {} for j in joints}
+    for (j, name), png in zip(jobs, pngs):
+        out[j][name] = png
     return out
 
 

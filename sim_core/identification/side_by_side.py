@@ -1,4 +1,4 @@
-"""Independent simulations run side by side in forked processes.
+"""Independent simulations (and other independent jobs) run side by side in forked processes.
 
 After the candidate search a diagnosis simulates a few models at the default integrator step (each
 effect removed from the refitted model, the refitted model, the baseline, the columns of an
@@ -29,14 +29,23 @@ class SideBySide:
         self.workers = workers or len(os.sched_getaffinity(0))
         self._pool: ProcessPoolExecutor | None = None
 
-    def simulate(self, runner: Runner, specs: list, n: int | None = None) -> list[Outputs]:
-        """``runner.simulate(spec, n)`` for every spec, in order."""
-        if self.workers <= 1 or len(specs) <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-            return [runner.simulate(s, n) for s in specs]
+    def _parallel(self, count: int) -> bool:
+        return self.workers > 1 and count > 1 and "fork" in multiprocessing.get_all_start_methods()
+
+    def map(self, fn, items: list) -> list:
+        """``fn(item)`` for every item, in order (``fn`` a module-level function: it travels by pickle)."""
+        if not self._parallel(len(items)):
+            return [fn(i) for i in items]
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("fork"))
+        return list(self._pool.map(fn, items))
+
+    def simulate(self, runner: Runner, specs: list, n: int | None = None) -> list[Outputs]:
+        """``runner.simulate(spec, n)`` for every spec, in order."""
+        if not self._parallel(len(specs)):
+            return [runner.simulate(s, n) for s in specs]
         runner.calls += len(specs)
-        return list(self._pool.map(_simulate, [(runner, s, n) for s in specs]))
+        return self.map(_simulate, [(runner, s, n) for s in specs])
 
     def close(self) -> None:
         if self._pool is not None:
