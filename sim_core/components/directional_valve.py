@@ -7,15 +7,17 @@ from numba import njit
 from ..kernel.layout import AP, col
 from .base import Component, Parameter, ParameterError
 
-KV, OVERLAP, NULL_LEAK, POLY1, POLY2, POLY3, DP_TR = AP.declare(
+KV, OVERLAP, NULL_LEAK, POLY1, POLY2, POLY3, DP_TR, FLOW_EXP, DP_RATED = AP.declare(
     "valve",
-    col("KV", "m^3/s/sqrt(Pa)", "valve flow coefficient per metering edge at full opening"),
+    col("KV", "m^3/s/Pa^n", "valve flow coefficient per metering edge at full opening (n: FLOW_EXP)"),
     col("OVERLAP", "-", "spool overlap (stroke fraction)"),
     col("NULL_LEAK", "-", "null leakage opening of every edge (fraction of full opening)"),
     col("POLY1", "-", "opening characteristic a(s) = c1 s + c2 s^2 + c3 s^3"),
     col("POLY2", "-", "opening characteristic, c2"),
     col("POLY3", "-", "opening characteristic, c3"),
     col("DP_TR", "Pa", "laminar/turbulent transition pressure of the orifices"),
+    col("FLOW_EXP", "-", "exponent n of the metering edges' flow law Q ~ dp^n (0.5: turbulent orifice)"),
+    col("DP_RATED", "Pa", "pressure drop per edge at which the rated flow is given"),
 )
 
 CITATION_VALVE = (
@@ -31,11 +33,14 @@ class DirectionalValve(Component):
 
     Each metering edge follows the orifice law with a laminar region near zero pressure drop:
 
-        Q = K_v a(s) f(dp),   f(dp) = dp / (dp^2 + dp_tr^2)^(1/4)
+        Q = K_v a(s) f(dp),   f(dp) = dp (dp^2 + dp_tr^2)^((n - 1) / 2)
 
-    ``f`` is sqrt(|dp|) sign(dp) in the turbulent regime and dp / sqrt(dp_tr) (laminar, finite slope)
+    ``f`` is |dp|^n sign(dp) in the turbulent regime and dp dp_tr^(n - 1) (laminar, finite slope)
     for |dp| << dp_tr, so the pressure equations stay well conditioned when a chamber approaches the
-    supply or tank pressure (Ellman & Piche 1999). ``K_v = Q_rated / sqrt(dp_rated)`` per edge.
+    supply or tank pressure (Ellman & Piche 1999). ``K_v = Q_rated / dp_rated^n`` per edge. The
+    exponent ``n`` (``flow_exponent``) is 0.5 for a sharp-edged orifice; a valve whose measured
+    flow-vs-drop curve is flatter or steeper (spool slots with a long land, flow forces) is described
+    by another ``n``; ``rated_flow`` keeps its meaning, the flow at ``rated_pressure_drop``.
 
     The opening characteristic maps the metering spool position ``s`` (stroke fraction, overlap
     removed) to the relative orifice area:
@@ -57,6 +62,7 @@ class DirectionalValve(Component):
         Parameter("null_leakage", "-", "leakage opening of every edge at centre, fraction of full opening", 0.0, 0.0, 0.1),
         Parameter("transition_pressure", "Pa", "pressure drop of the laminar/turbulent transition", 1.0e5, 1e2, 5e6),
         Parameter("characteristic", "-", "opening polynomial coefficients [c1, c2, c3], sum 1", (1.0, 0.0, 0.0), kind="vec", length=3),
+        Parameter("flow_exponent", "-", "exponent n of the edges' flow law Q ~ dp^n (0.5: turbulent orifice)", 0.5, 0.3, 1.0),
     )
 
     def __init__(self, values=None, where=""):
@@ -72,8 +78,9 @@ class DirectionalValve(Component):
 
     @property
     def flow_coefficient(self) -> float:
-        """K_v per edge at full opening (m^3/s/sqrt(Pa))."""
-        return self.values["rated_flow"] / math.sqrt(self.values["rated_pressure_drop"])
+        """K_v per edge at full opening (m^3/s/Pa^n, n = flow_exponent)."""
+        n, dp = self.values["flow_exponent"], self.values["rated_pressure_drop"]
+        return self.values["rated_flow"] / (math.sqrt(dp) if n == 0.5 else dp ** n)
 
     def lower(self, lw, a, spec, js):
         AP_ = lw.AP
@@ -82,15 +89,31 @@ class DirectionalValve(Component):
         AP_[a, NULL_LEAK] = self["null_leakage"]
         AP_[a, POLY1], AP_[a, POLY2], AP_[a, POLY3] = self["characteristic"]
         AP_[a, DP_TR] = self["transition_pressure"]
+        AP_[a, FLOW_EXP] = self["flow_exponent"]
+        AP_[a, DP_RATED] = self["rated_pressure_drop"]
 
 
 @njit(inline="always")
 def orifice(dp, tr):
-    """Regularised orifice function f(dp) (sqrt(Pa)) with its slope df/d(dp)."""
+    """Regularised orifice function f(dp) (sqrt(Pa)) with its slope df/d(dp): the flow law with
+    exponent 1/2."""
     s = dp * dp + tr * tr
     r = math.sqrt(math.sqrt(s))        # s^(1/4): sqrt(sqrt()) is ~3x faster than pow(s, 0.25)
     f = dp / r
     slope = (0.5 * dp * dp + tr * tr) / (s * r)
+    return f, slope
+
+
+@njit(inline="always")
+def orifice_n(dp, tr, n):
+    """f(dp) = dp (dp^2 + dp_tr^2)^((n - 1) / 2) (Pa^n) and its slope, for a flow exponent ``n``
+    (n = 0.5 takes :func:`orifice`, bit for bit)."""
+    if n == 0.5:
+        return orifice(dp, tr)
+    s = dp * dp + tr * tr
+    r = s ** (0.5 * (1.0 - n))         # (dp^2 + tr^2)^((1 - n) / 2)
+    f = dp / r
+    slope = (n * dp * dp + tr * tr) / (s * r)
     return f, slope
 
 
@@ -127,18 +150,19 @@ def edge_flows(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
     respect to the port pressure (P->A, A->T, P->B, B->T). Closed edges pass nothing: a spool
     travelling one way leaves the other pair shut (unless the valve leaks at null)."""
     tr = AP[a, DP_TR]
+    n = AP[a, FLOW_EXP]
     q_pa = q_bt = dq_pa = dq_bt = 0.0
     q_pb = q_at = dq_pb = dq_at = 0.0
     if g_pa != 0.0:
-        f_pa, d_pa = orifice(p_s - ua, tr)
-        f_bt, d_bt = orifice(ub - p_t, tr)
+        f_pa, d_pa = orifice_n(p_s - ua, tr, n)
+        f_bt, d_bt = orifice_n(ub - p_t, tr, n)
         q_pa = g_pa * f_pa
         q_bt = g_pa * f_bt
         dq_pa = -g_pa * d_pa
         dq_bt = g_pa * d_bt
     if g_pb != 0.0:
-        f_at, d_at = orifice(ua - p_t, tr)
-        f_pb, d_pb = orifice(p_s - ub, tr)
+        f_at, d_at = orifice_n(ua - p_t, tr, n)
+        f_pb, d_pb = orifice_n(p_s - ub, tr, n)
         q_at = g_pb * f_at
         q_pb = g_pb * f_pb
         dq_at = g_pb * d_at
@@ -150,5 +174,6 @@ def edge_flows(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
 def valve_flows_only(a, g_pa, g_pb, p_s, p_t, ua, ub, AP):
     """The four edge flows without slopes (reference solver)."""
     tr = AP[a, DP_TR]
-    return (g_pa * orifice(p_s - ua, tr)[0], g_pb * orifice(ua - p_t, tr)[0],
-            g_pb * orifice(p_s - ub, tr)[0], g_pa * orifice(ub - p_t, tr)[0])
+    n = AP[a, FLOW_EXP]
+    return (g_pa * orifice_n(p_s - ua, tr, n)[0], g_pb * orifice_n(ua - p_t, tr, n)[0],
+            g_pb * orifice_n(p_s - ub, tr, n)[0], g_pa * orifice_n(ub - p_t, tr, n)[0])

@@ -82,9 +82,12 @@ class Hose(Component):
 
     @staticmethod
     def lower_fault(lw, a, kind, mode):
-        from .directional_valve import KV
+        from .directional_valve import DP_RATED, FLOW_EXP, KV
 
-        lw.AP[a, F_BURST_KV] = float(mode.get("flow_coefficient", 5.0 * lw.AP[a, KV]))
+        # default: a rupture passing 5x the valve's rated flow at its rated drop (a sqrt-law orifice)
+        kv, n, dp = lw.AP[a, KV], lw.AP[a, FLOW_EXP], lw.AP[a, DP_RATED]
+        kv_sqrt = kv if n == 0.5 else kv * dp ** n / math.sqrt(dp)
+        lw.AP[a, F_BURST_KV] = float(mode.get("flow_coefficient", 5.0 * kv_sqrt))
 
 
 @njit(inline="always")
