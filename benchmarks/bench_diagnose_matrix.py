@@ -19,8 +19,8 @@ diagnosed with the real commands.
 * clean: HydroLek at 50 Hz with jittered timestamps, start pose off the spec's, a 12-bit angle and
   1 mrad noise; the rig's clean record;
 * out of bank: supply pressure -15 %, oil bulk modulus -15 %, link masses +15 %, a Stribeck friction
-  curve (not a diagnosis candidate), an unmodelled 8 Hz mode between the elbow and its sensor. (A
-  valve whose flow law has another exponent is not built: the simulator has no such valve.)
+  curve (not a diagnosis candidate), an unmodelled 8 Hz mode between the elbow and its sensor, a valve
+  whose flow law has the exponent 0.6-0.7 instead of the orifice's 0.5 (``valve.flow_exponent``).
 
 Scored: a single is right when the hidden effect is named alone; a pair when both are named and
 nothing else; a clean record when the verdict is ``no_significant_discrepancy``; an out-of-bank record
@@ -410,6 +410,14 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
                     "noise": 4e-4, "hidden": []}
             case.update(extra)
             cases.append(case)
+        # a valve whose flow law has another exponent than the orifice's 1/2, across 0.6-0.7 (appended
+        # after the others so that their draws stay as they were)
+        for k in range(seeds):
+            n = 0.6 + 0.1 * k / max(seeds - 1, 1)
+            cases.append({"id": f"out_of_bank/hydrolek/valve_flow_exponent/{k + 1}", "group": "out_of_bank",
+                          "robot": "hydrolek", "joint": JOINT, "seed": 550 + k,
+                          "excitation": ("prbs", "multisine", "doublets")[k % 3], "noise": 4e-4, "hidden": [],
+                          "set": ["--set", f"joints.{JOINT}.valve.flow_exponent={n:.3f}"]})
     return cases
 
 
@@ -428,6 +436,13 @@ def run_case(case: dict, work: Path) -> dict:
            "hidden": [(n, j, p) for n, j, p in case["hidden"]], "param_error_pct": None}
     if "trace_rms" in case:
         out["trace_rms"], out["trace_noise"] = case["trace_rms"], case["trace_noise"]
+    # how far the final model's channels sit below their noise ceilings, and why a record was left unexplained
+    ceilings = d["decision"].get("channel_ceilings", {}).get(joint, {})
+    fits = d["extended"]["channels"].get(joint, {})
+    out["channel_gaps"] = {c: round(v - fits[c], 2) for c, v in ceilings.items() if c in fits}
+    if d.get("unexplained"):
+        out["unexplained_because"] = d["unexplained"]["because"]
+        out["closest"] = sorted((c["effect"], c["joint"]) for c in d["unexplained"].get("closest", []))
     finding = calibration_finding(d, case, joint)
     if finding is not None:
         # the rig's spec marks this parameter estimated: the diagnosis calibrates it as a nuisance and

@@ -467,6 +467,32 @@ def test_unexplained_when_the_model_misses_by_far_and_the_residual_is_not_noise(
     assert r and "close 100 %" in r[0]
 
 
+def test_unexplained_when_one_channel_misses_by_far_though_the_score_comes_close():
+    """A cause that fits angle and velocity and leaves the pressures as wrong as before (a valve with
+    another flow law named as an asymmetry): the mean over channels is within FAR_POINTS of the ceiling,
+    the pressure channel is not."""
+    far = 100.0 - dc.FAR_POINTS
+    ceilings = {"j2": {"angle": 99.5, "velocity": 97.0, "pressure": 100.0}}
+
+    def why(pressure, fails=True, **kw):
+        fits = {"j2": {"angle": 99.2, "velocity": 96.5, "pressure": pressure}}
+        return dc.unexplained_reasons(score=float(np.mean(list(fits["j2"].values()))), ceiling=98.8,
+                                      angle_fits={"j2": 99.2}, residual_fails=fails, channel_fits=fits,
+                                      channel_ceilings=ceilings, **kw)
+
+    r = why(far - 2.0)
+    assert r and "pressure fit on j2" in r[0] and "angle" not in r[0] and "velocity" not in r[0]
+    # the same channel gap with a white, independent residual: nothing to explain
+    assert not why(far - 2.0, fails=False)
+    # within FAR_POINTS of its own ceiling: explained
+    assert not why(100.0 - dc.FAR_POINTS + 1.0)
+    # a channel the record lacks (no pressures) is not judged
+    assert not dc.unexplained_reasons(score=98.0, ceiling=98.5, angle_fits={"j2": 99.2}, residual_fails=True,
+                                      channel_fits={"j2": {"angle": 99.2, "velocity": 96.5}}, channel_ceilings=ceilings)
+    # without channel figures the rule is silent (the score rule alone)
+    assert not dc.unexplained_reasons(score=98.0, ceiling=98.5, angle_fits={"j2": 99.2}, residual_fails=True)
+
+
 def test_unexplained_when_an_angle_fit_is_below_zero():
     r = dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": 90.0, "j3": -12.0}, residual_fails=False)
     assert r and "j3" in r[0] and "j2" not in r[0]

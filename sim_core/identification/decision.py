@@ -385,7 +385,8 @@ def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: b
 
 # ---- verdict ----------------------------------------------------------------------------------------------
 def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, float], residual_fails: bool,
-                        base_score: float | None = None) -> list[str]:
+                        base_score: float | None = None, channel_fits: dict[str, dict[str, float]] | None = None,
+                        channel_ceilings: dict[str, dict[str, float]] | None = None) -> list[str]:
     """Why the final model (the extended one, or the baseline when nothing is named) does not
     explain the record; empty when it does.
 
@@ -394,7 +395,11 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     * its score more than FAR_POINTS below the noise ceiling while the residual tests fail (the
       misfit is in the data, not in the noise). Named effects that closed most of a runaway
       baseline's distance do not excuse it: a named cause must explain the record, not only beat
-      the baseline (``base_score`` only says how much of the distance they closed)."""
+      the baseline (``base_score`` only says how much of the distance they closed);
+    * one recorded channel (``channel_fits``: angle, velocity, pressure per joint) more than
+      FAR_POINTS below its own noise ceiling (``channel_ceilings``) while the residual tests fail:
+      a cause that fits the angle and leaves the chamber pressures as wrong as before has not
+      explained the record, even when the mean over channels comes close."""
     why = []
     below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
     if below:
@@ -407,6 +412,13 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
                      f"baseline's distance")
         why.append(text)
+    elif residual_fails and channel_fits and channel_ceilings:
+        far = [(j, ch, f, channel_ceilings[j][ch]) for j, fits in channel_fits.items() for ch, f in fits.items()
+               if ch in channel_ceilings.get(j, {}) and not channel_ceilings[j][ch] - f <= FAR_POINTS]
+        if far:
+            why.append("the model's " + ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise "
+                                                   f"ceiling {c:.1f}" for j, ch, f, c in far)
+                       + f" (more than {FAR_POINTS:g}) and its residual tests fail")
     return why
 
 

@@ -36,7 +36,7 @@ from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
-from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
+from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints, channel_ceilings,
                         free_list, select, without)
 from .signatures import joint_signatures, public
 from .side_by_side import SideBySide
@@ -70,6 +70,7 @@ class Diagnosis:
     closed_loop: dict = field(default_factory=dict)   # closed_loop.detect's answer
     unexplained: dict = field(default_factory=dict)   # why and where the record is left unexplained
     pairs: list[dict] = field(default_factory=list)   # the masked-pair fits, when a pair search ran
+    channel_ceilings: dict = field(default_factory=dict)   # joint -> channel -> noise ceiling (fit, %)
 
     @property
     def verdict(self) -> str:
@@ -97,6 +98,7 @@ class Diagnosis:
                         "when recorded, chamber pressures",
                 "threshold_points": THRESHOLD_POINTS, "noise_factor": NOISE_FACTOR,
                 "score_ceiling": self.ceiling, "stopped": self.stopped,
+                "channel_ceilings": self.channel_ceilings,
                 "residual_explained_pct": "share of the baseline's normalised residual a gain removes: "
                                           "100 gain / (100 - baseline score)",
                 "far_points": FAR_POINTS,
@@ -364,7 +366,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "recalibrations": recalibrations}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
-    unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected)
+    ceilings = channel_ceilings(st, vprob.joints)
+    unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
+                               ceilings)
     if unexplained and selected:
         # a named cause must explain the record: the effects tried stay in the report as the closest
         # candidates, the model is not extended
@@ -378,7 +382,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
-                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs)
+                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings)
 
 
 def _score(fits: dict, joints: list[str]) -> float:
@@ -386,17 +390,20 @@ def _score(fits: dict, joints: list[str]) -> float:
 
 
 def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, ext_fits: dict, ext_out: Outputs,
-                 ext_tests: dict, ceiling: float, selected: list[dict]) -> dict:
+                 ext_tests: dict, ceiling: float, selected: list[dict], ceilings: dict[str, dict[str, float]]) -> dict:
     """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
-    model explains the record."""
+    model explains the record. ``ceilings``: the channels' noise ceilings per joint."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
     why = unexplained_reasons(score=score, ceiling=ceiling, angle_fits={j: ext_fits[j]["angle"] for j in joints},
                               residual_fails=any(residual_fails(ext_tests.get(j, {})) for j in joints),
-                              base_score=_score(base_fits, joints))
+                              base_score=_score(base_fits, joints),
+                              channel_fits={j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints},
+                              channel_ceilings=ceilings)
     if not why:
         return {}
     return {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
+            "channel_ceilings": {j: {c: round(v, 3) for c, v in ch.items()} for j, ch in ceilings.items()},
             "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
             "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
                         for s in selected],

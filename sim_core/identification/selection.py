@@ -42,7 +42,7 @@ from .record import Record
 from .simulation import Outputs, Runner
 
 __all__ = ["AMBIGUITY", "MAX_EFFECTS", "MAX_PAIRS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
-           "Setting", "evaluate", "select", "without", "model_with", "free_list", "affected_joints",
+           "Setting", "channel_ceilings", "evaluate", "select", "without", "model_with", "free_list", "affected_joints",
            "pair_candidate"]
 
 NOISE_DRAWS = 16
@@ -175,27 +175,34 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
 
 def score_ceiling(st: Setting, joints: list[str]) -> float:
     """Best decision score a perfect model could reach on the validation data, given the noise."""
+    ceilings = channel_ceilings(st, joints)
+    return float(np.mean([float(np.mean(list(ceilings[j].values()))) for j in joints]))
+
+
+def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, float]]:
+    """Per joint, the best NRMSE fit (percent) a perfect model could reach on each validation channel
+    (angle, velocity and, when recorded, the chambers' pressures), given the noise."""
     from scipy.signal import savgol_coeffs
 
     val = st.val
     w = savgol_window(val.rec.rate)
     kv = float(np.linalg.norm(savgol_coeffs(w, 2, deriv=1, delta=val.rec.dt)))
-    vals = []
+    out = {}
     for j in joints:
-        chans = []
+        chans = {}
         for ch, sig in (("angle", st.noise.get(j, 0.0)), ("velocity", st.noise.get(j, 0.0) * kv)):
             y = val.meas[(j, ch)]
             den = float(np.linalg.norm(y - y.mean())) or 1.0
-            chans.append(100.0 * (1.0 - sig * math.sqrt(y.size) / den))
+            chans[ch] = 100.0 * (1.0 - sig * math.sqrt(y.size) / den)
         if (j, "p_a") in val.meas:
             pc = []
             for ch in ("p_a", "p_b"):
                 y = val.meas[(j, ch)]
                 den = float(np.linalg.norm(y - y.mean())) or 1.0
                 pc.append(100.0 * (1.0 - st.pressure_noise.get(j, 0.0) * math.sqrt(y.size) / den))
-            chans.append(float(np.mean(pc)))
-        vals.append(float(np.mean(chans)))
-    return float(np.mean(vals))
+            chans["pressure"] = float(np.mean(pc))
+        out[j] = chans
+    return out
 
 
 # ---- parallel evaluation --------------------------------------------------------------------------
