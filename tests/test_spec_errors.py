@@ -172,3 +172,19 @@ def test_urdf_problems_name_the_urdf(cli, tmp_path):
     d = _rig(tmp_path, urdf_edit=lambda t: t.replace("</robot>", "<link"), name="m")
     f, line, rest = _error(cli, d)
     assert f.endswith("m/lift.urdf") and rest.startswith("malformed URDF")
+
+
+def test_cylinder_mounts_that_do_not_extend_over_the_range_are_refused():
+    """The mounting geometry is checked (and cached) per set of mounts: a rod eye on the axis or behind
+    it is refused with the cylinder's path, and the valid mounts are accepted again afterwards."""
+    spec = load_robot("hydrolek")
+    good = spec.get("joints.j2.cylinder.rod_mount")
+    for bad in ([0.0, 0.0, 0.0], [-0.2, 0.0, 0.0]):
+        s = spec.copy()
+        with pytest.raises(SpecError, match=r"joints\.j2\.cylinder: positive joint motion must extend the cylinder") as err:
+            s.set("joints.j2.cylinder.rod_mount", bad)
+        arm = float(re.search(r"moment arm falls to (\S+) m", str(err.value)).group(1))
+        assert arm <= 1e-4, str(err.value)
+    s = spec.copy()
+    s.set("joints.j2.cylinder.rod_mount", list(good))
+    assert s.get("joints.j2.cylinder.rod_mount") == spec.get("joints.j2.cylinder.rod_mount")

@@ -1,6 +1,7 @@
 """Double-acting single-rod (asymmetric) cylinder: on a revolute joint through its mounts, or acting
 directly on a prismatic joint."""
 
+import functools
 import math
 
 import numpy as np
@@ -126,26 +127,17 @@ class Cylinder(Component):
         """(C0, D1, D2, L_min, stroke) for a joint with unit ``axis`` and limits [lower, upper]."""
         if not (math.isfinite(lower) and math.isfinite(upper)):
             raise ParameterError(f"{self.where}: a cylinder-driven joint needs finite limits in the URDF")
-        k = np.asarray(axis, dtype=float)
-        rb = np.asarray(self.values["base_mount"])
-        rr = np.asarray(self.values["rod_mount"])
-        r_par = np.dot(rr, k) * k
-        r_perp = rr - r_par
-        c0 = float(rb @ rb + rr @ rr - 2.0 * rb @ r_par)
-        d1 = float(rb @ r_perp)
-        d2 = float(rb @ np.cross(k, r_perp))
-        qs = np.linspace(lower, upper, 201)
-        L2 = c0 - 2.0 * (d1 * np.cos(qs) + d2 * np.sin(qs))
-        if np.any(L2 <= 0.0):
+        c0, d1, d2, l_min, stroke, min_l2, min_arm = _linkage(
+            tuple(float(x) for x in axis), float(lower), float(upper),
+            tuple(float(x) for x in self.values["base_mount"]), tuple(float(x) for x in self.values["rod_mount"]))
+        if min_l2 <= 0.0:
             raise ParameterError(f"{self.where}: mounts coincide somewhere in the joint range")
-        arm = (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(L2)
-        if np.any(arm <= 1e-4):
+        if min_arm <= 1e-4:
             raise ParameterError(
                 f"{self.where}: positive joint motion must extend the cylinder over the whole range "
-                f"[{lower}, {upper}] rad (moment arm falls to {arm.min():.4g} m); move the mounts"
+                f"[{lower}, {upper}] rad (moment arm falls to {min_arm:.4g} m); move the mounts"
             )
-        L = np.sqrt(L2)
-        return c0, d1, d2, float(L[0]), float(L[-1] - L[0])
+        return c0, d1, d2, l_min, stroke
 
     def check_geometry(self, tree, i: int) -> None:
         """Raise :class:`ParameterError` unless the cylinder fits joint ``i`` of ``tree`` over its range."""
@@ -281,3 +273,25 @@ def cylinder_geometry(a, th, om, AP, XS):
     qdisp_a = AP[a, AREA_A] * xd
     qdisp_b = -AP[a, AREA_B] * xd
     return va, vb, qdisp_a, qdisp_b, qdisp_a, qdisp_b    # volumes change with the displaced flows
+
+
+@functools.lru_cache(maxsize=256)
+def _linkage(axis: tuple, lower: float, upper: float, base_mount: tuple, rod_mount: tuple):
+    """The mounting geometry over the joint range: (C0, D1, D2, L_min, stroke, min L^2, min arm).
+    Cached: every lowering and every parameter change checks it, and it only depends on the mounts."""
+    k = np.asarray(axis, dtype=float)
+    rb = np.asarray(base_mount, dtype=float)
+    rr = np.asarray(rod_mount, dtype=float)
+    r_par = np.dot(rr, k) * k
+    r_perp = rr - r_par
+    c0 = float(rb @ rb + rr @ rr - 2.0 * rb @ r_par)
+    d1 = float(rb @ r_perp)
+    d2 = float(rb @ np.cross(k, r_perp))
+    qs = np.linspace(lower, upper, 201)
+    L2 = c0 - 2.0 * (d1 * np.cos(qs) + d2 * np.sin(qs))
+    min_l2 = float(L2.min())
+    if min_l2 <= 0.0:
+        return c0, d1, d2, math.nan, math.nan, min_l2, math.nan
+    arm = (d1 * np.sin(qs) - d2 * np.cos(qs)) / np.sqrt(L2)
+    L = np.sqrt(L2)
+    return c0, d1, d2, float(L[0]), float(L[-1] - L[0]), min_l2, float(arm.min())
