@@ -36,7 +36,7 @@ from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
-from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints, channel_ceilings,
+from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         free_list, select, without)
 from .signatures import joint_signatures, public
 from .side_by_side import SideBySide
@@ -366,7 +366,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "recalibrations": recalibrations}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
-    ceilings = channel_ceilings(st, vprob.joints)
+    ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
                                ceilings)
     if unexplained and selected:

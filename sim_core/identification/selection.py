@@ -173,10 +173,10 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
     return float(np.std(gains))
 
 
-def score_ceiling(st: Setting, joints: list[str]) -> float:
-    """Best decision score a perfect model could reach on the validation data, given the noise."""
-    ceilings = channel_ceilings(st, joints)
-    return float(np.mean([float(np.mean(list(ceilings[j].values()))) for j in joints]))
+def score_ceiling(ceilings: dict[str, dict[str, float]]) -> float:
+    """Best decision score a perfect model could reach on the validation data, given the noise: the
+    mean over joints of the mean of their channels' ceilings (:func:`channel_ceilings`)."""
+    return float(np.mean([float(np.mean(list(ch.values()))) for ch in ceilings.values()]))
 
 
 def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, float]]:
@@ -311,6 +311,7 @@ class Selection:
     pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
     # (kept, dropped) after the final check -> (accepted, fast model) with a pair that passes, or None
     resume: Callable | None = None
+    channel_ceilings: dict[str, dict[str, float]] = field(default_factory=dict)   # joint -> channel -> ceiling
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
@@ -322,7 +323,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
     condition for the pair search); None: no pair search."""
     log = log or (lambda msg: None)
-    ceiling = score_ceiling(st, st.val.joints)
+    ceilings = channel_ceilings(st, st.val.joints)
+    ceiling = score_ceiling(ceilings)
     base = _Baseline(st)
 
     def evaluate_round(pool, model, accepted, r):
@@ -351,7 +353,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    sel = Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs)
+    sel = Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs, channel_ceilings=ceilings)
 
     def resume(kept, dropped):
         """decision.pairs_after_a_drop on the search's model without the dropped effects."""
