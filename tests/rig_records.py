@@ -28,12 +28,13 @@ def reference_steps(lo: float, hi: float, duration: float, rng) -> callable:
 
 def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[str, float], seed: int,
                        duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
-                       start_offset: float = 0.0, jitter: float = 0.1):
+                       start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
     ``hidden``: (effect, params) switched on at the rig's one actuated joint; ``kp``: V per joint unit
-    (default: full command for 20 % of the range of motion)."""
+    (default: full command for 20 % of the range of motion); ``log_every``: the controller runs at
+    ``log_every`` x ``rate`` and every ``log_every``-th sample is logged (a logger slower than the loop)."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
@@ -62,10 +63,10 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
         pos = A * volts + B                      # the rig's controller reads its own sensor
         u = float(np.clip(kp * (ref(t) - pos), u_lo, u_hi))
         rows.append((t, volts, round(u, 3)))
-        dt = (1.0 + rng.uniform(-jitter, jitter)) / rate
+        dt = (1.0 + rng.uniform(-jitter, jitter)) / (rate * log_every)
         y = sim.step(np.array([u]), dt)[0]
         t += dt
-    return np.array(rows), spec
+    return np.array(rows)[::log_every], spec
 
 
 def write_headerless(rows: np.ndarray, path) -> None:

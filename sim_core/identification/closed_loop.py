@@ -14,7 +14,10 @@ What it means for the diagnosis: the recorded command is what the valve saw, so 
 input and output-error fits are valid; but the loop shapes what the record shows. A delay appears
 as phase (a lag between command and motion, a loop that rings), not as a dead time after steps; a
 deadband appears as limit cycles or a standing error around the reference, not as a stall at small
-commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider.
+commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider. The command is replayed
+held from one logged sample to the next, which is what the valve saw only when the controller ran at
+the log's rate: a faster controller's reference steps fall between samples, and the replay starts
+each move up to one period late, an error an open-loop replay carries to the end of the record.
 """
 
 from __future__ import annotations
@@ -31,7 +34,9 @@ NOTE = ("the record was taken in closed loop ({joints}): the command follows -K 
         "The recorded command is what the valve saw and stays the model's input; but a delay shows as phase (a lag "
         "between command and motion, a ringing loop) rather than as dead time after steps, and a deadband as limit "
         "cycles or a standing error around the reference rather than a stall at small commands; the loop's narrow "
-        "excitation widens their intervals")
+        "excitation widens their intervals. The model holds each logged command until the next sample: log at the "
+        "controller's own rate (a controller faster than its log steps between samples, and the replay misses "
+        "part of every step)")
 
 
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
