@@ -50,6 +50,7 @@ def test_an_unmodelled_8_hz_mode_is_unexplained_with_its_band(cli, tmp_path):
     assert d["selected"] == []
     u = d["unexplained"]
     assert u["because"] and u["score_ceiling"] - u["score"] > u["far_points"]
+    assert u["record_causes"] == []     # open loop: the command replayed is the command applied
     ev = u["evidence"]["j2"]
     lo, hi = ev["frequency"]["band_hz"]
     assert lo < MODE_HZ < hi and ev["frequency"]["band_share"] > 0.5

@@ -25,7 +25,7 @@ HIDDEN = {"deadband": ("width", 0.8), "valve_asymmetry": ("ratio", 0.7), "delay"
           "valve_offset": ("offset", 0.25)}
 
 
-def _diagnose(cli, tmp_path, template, hidden, seed=5):
+def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1):
     rig = tmp_path / "rig"
     cli("rig", "new", template, "--out", rig, check=True)
     spec = load_robot(rig)
@@ -33,7 +33,8 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5):
     i = spec.tree.index(spec.joint(j).dof)
     span = float(spec.tree.upper[i] - spec.tree.lower[i])
     off = {(k if k.startswith("supply") else f"joints.{j}.{k}"): f for k, f in OFF.items()}
-    rows, _ = closed_loop_record(rig, hidden=hidden, off=off, seed=seed, duration=60.0, start_offset=0.05 * span)
+    rows, _ = closed_loop_record(rig, hidden=hidden, off=off, seed=seed, duration=60.0, start_offset=0.05 * span,
+                                 rate=rate, log_every=log_every)
     write_headerless(rows, tmp_path / "log.csv")
     cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
@@ -57,6 +58,20 @@ def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, template, ef
 def test_a_clean_record_of_an_off_nominal_rig_is_no_discrepancy(cli, tmp_path, template):
     _, d = _diagnose(cli, tmp_path, template, None)
     assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+
+
+def test_a_log_slower_than_its_controller_is_unexplained_with_the_replay_as_a_cause(cli, tmp_path):
+    """The rig's controller runs at 1 kHz and a PLC logs every 100th sample (10 Hz): the reference steps
+    fall between logged samples, and replaying the held samples starts each move up to 100 ms late,
+    which an open-loop replay carries to the end (the same rig logged at its controller's rate is
+    clean, above). Nothing in the bank is that: the verdict is unexplained, and the report points at
+    the record's command timing."""
+    _, d = _diagnose(cli, tmp_path, "cylinder", None, rate=10.0, log_every=100)
+    assert d["closed_loop"] is True
+    assert d["verdict"] == "unexplained_discrepancy", (d["selected"], d["unexplained"])
+    causes = d["unexplained"]["record_causes"]
+    assert len(causes) == 1 and "controller's rate" in causes[0]
+    assert "In the record:" in (tmp_path / "rep" / "report.html").read_text()
 
 
 def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli):

@@ -38,6 +38,12 @@ NOTE = ("the record was taken in closed loop ({joints}): the command follows -K 
         "controller's own rate (a controller faster than its log steps between samples, and the replay misses "
         "part of every step)")
 
+# Said beside an unexplained verdict on a closed-loop record: a cause in the record, not in the model
+HELD_REPLAY = ("the record is closed loop and its command is replayed held from one logged sample to the next, which "
+               "is what the valve saw only if the controller ran at the log's rate: a faster controller's reference "
+               "steps fall between samples, the replay starts each move up to one period late, and an open-loop "
+               "replay carries that to the end of the record. Check the controller's rate; log the command at it")
+
 
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
     """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),

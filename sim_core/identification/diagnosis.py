@@ -27,7 +27,7 @@ import numpy as np
 
 from . import output_error as oe
 from .calibration import calibrate, plan
-from .closed_loop import detect as detect_closed_loop
+from .closed_loop import HELD_REPLAY, detect as detect_closed_loop
 from .candidates import bank
 from .decision import FAR_POINTS, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
@@ -368,7 +368,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
-                               ceilings)
+                               ceilings, closed_loop=bool(loop["closed_loop"]))
     if unexplained and selected:
         # a named cause must explain the record: the effects tried stay in the report as the closest
         # candidates, the model is not extended
@@ -390,9 +390,12 @@ def _score(fits: dict, joints: list[str]) -> float:
 
 
 def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, ext_fits: dict, ext_out: Outputs,
-                 ext_tests: dict, ceiling: float, selected: list[dict], ceilings: dict[str, dict[str, float]]) -> dict:
+                 ext_tests: dict, ceiling: float, selected: list[dict], ceilings: dict[str, dict[str, float]],
+                 closed_loop: bool = False) -> dict:
     """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
-    model explains the record. ``ceilings``: the channels' noise ceilings per joint."""
+    model explains the record. ``ceilings``: the channels' noise ceilings per joint. ``closed_loop``:
+    the record is, and the way its command is replayed is a cause in the record to check
+    (``record_causes``)."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
     why = unexplained_reasons(score=score, ceiling=ceiling, angle_fits={j: ext_fits[j]["angle"] for j in joints},
@@ -407,7 +410,8 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
             "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
             "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
                         for s in selected],
-            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits)}
+            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits),
+            "record_causes": [HELD_REPLAY] if closed_loop else []}
 
 
 def _pct(v: float):

@@ -363,7 +363,10 @@ def _unexplained_html(data: dict) -> str:
     u = data["unexplained"]
     parts = ["<h2 class='bad'>Unexplained discrepancy</h2><p>Neither the calibration nor any effect of the bank "
              "explains the record: " + e("; ".join(u["because"])) + ". The model is not extended; the cause is "
-             "outside the bank (a supply or oil property, a structural mode, a different flow law, ...).</p>"]
+             "outside the bank (a supply or oil property, a structural mode, a different flow law, ...)"
+             + (", or in the record" if u.get("record_causes") else "") + ".</p>"]
+    for cause in u.get("record_causes", []):
+        parts.append(f"<p>In the record: {e(cause)}.</p>")
     if u.get("closest"):
         rows = "".join(f"<tr><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td><td>{c['gain']:+.2f}</td>"
                        f"<td>{_fmt(c.get('residual_explained_pct'))}</td></tr>" for c in u["closest"])
@@ -462,6 +465,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
     u = data.get("unexplained")
     if u:
         lines += ["Unexplained: " + "; ".join(u["because"]) + ".", ""]
+        lines += [f"In the record: {cause}." for cause in u.get("record_causes", [])] + ([""] if u.get("record_causes") else [])
         for c in u.get("closest", []):
             lines.append(f"- closest: {c['effect']}" + (f" on {c['joint']}" if c["joint"] else "")
                          + f", gain {c['gain']:+.2f} points{_share(c)}")
