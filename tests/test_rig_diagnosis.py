@@ -40,6 +40,7 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1):
         "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
     proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
     assert proc.returncode == 0, proc.stderr
+    (tmp_path / "stdout.txt").write_text(proc.stdout)
     return j, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
 
 
@@ -72,6 +73,8 @@ def test_a_log_slower_than_its_controller_is_unexplained_with_the_replay_as_a_ca
     causes = d["unexplained"]["record_causes"]
     assert len(causes) == 1 and "controller's rate" in causes[0]
     assert "In the record:" in (tmp_path / "rep" / "report.html").read_text()
+    printed = (tmp_path / "stdout.txt").read_text()
+    assert "unexplained: " in printed and "in the record: " in printed
 
 
 def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli):

@@ -81,6 +81,10 @@ def run(args):
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
         flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
+    for why in (d.unexplained or {}).get("because", []):
+        print(f"  unexplained: {why}")
+    for cause in (d.unexplained or {}).get("record_causes", []):
+        print(f"  in the record: {cause}")
     for j, f in d.baseline_fits.items():
         if f.get("excited", True):
             print(f"  fit {j}: {f['angle']:.2f} % -> {d.extended_fits[j]['angle']:.2f} %")
