@@ -14,10 +14,11 @@ What it means for the diagnosis: the recorded command is what the valve saw, so 
 input and output-error fits are valid; but the loop shapes what the record shows. A delay appears
 as phase (a lag between command and motion, a loop that rings), not as a dead time after steps; a
 deadband appears as limit cycles or a standing error around the reference, not as a stall at small
-commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider. The command is replayed
-held from one logged sample to the next, which is what the valve saw only when the controller ran at
-the log's rate: a faster controller's reference steps fall between samples, and the replay starts
-each move up to one period late, an error an open-loop replay carries to the end of the record.
+commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider.
+The command is replayed held from one logged sample to the next, which is what the valve saw only
+when the controller ran at the log's rate: a faster controller's reference steps fall between
+samples, and the replay starts each move up to one period late, an error an open-loop replay
+carries to the end of the record.
 """
 
 from __future__ import annotations

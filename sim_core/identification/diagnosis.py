@@ -394,8 +394,8 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                  closed_loop: bool = False) -> dict:
     """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
     model explains the record. ``ceilings``: the channels' noise ceilings per joint. ``closed_loop``:
-    the record is, and the way its command is replayed is a cause in the record to check
-    (``record_causes``)."""
+    whether the record is; if so, the held replay of its command is listed as a cause in the record
+    to check (``record_causes``)."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
     why = unexplained_reasons(score=score, ceiling=ceiling, angle_fits={j: ext_fits[j]["angle"] for j in joints},
