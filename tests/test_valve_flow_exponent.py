@@ -54,6 +54,20 @@ def test_rated_flow_keeps_its_meaning(lift, n):
     assert valve.flow_coefficient * orifice_n(dp, TR, n)[0] == pytest.approx(valve["rated_flow"], rel=1e-3)
 
 
+@pytest.mark.parametrize("n", [0.5, 0.7])
+def test_the_candidates_full_flow_is_the_kernels_law_at_supply(lift, n):
+    """actuator_scales sizes the diagnosis candidates by the full valve flow at supply pressure: the
+    same number the kernel's edge law gives there (for n = 0.7 an orifice's sqrt law would fall 24 % short)."""
+    from sim_core.identification.candidates import actuator_scales
+
+    spec = lift.spec.copy()
+    spec.set("joints.lift.valve.flow_exponent", n)
+    valve = spec.joint("lift").components["valve"]
+    ps = spec.supply["pressure"]
+    kernel = valve.flow_coefficient * orifice_n(ps, TR, n)[0]
+    assert actuator_scales(spec, "lift")["q_full"] == pytest.approx(kernel, rel=1e-3)
+
+
 def _steady(lift, n):
     spec = lift.spec.copy()
     spec.set("joints.lift.valve.flow_exponent", n)

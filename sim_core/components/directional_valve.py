@@ -82,6 +82,12 @@ class DirectionalValve(Component):
         n, dp = self.values["flow_exponent"], self.values["rated_pressure_drop"]
         return self.values["rated_flow"] / (math.sqrt(dp) if n == 0.5 else dp ** n)
 
+    def full_opening_flow(self, dp: float) -> float:
+        """Flow (m^3/s) through one fully open edge at the pressure drop ``dp`` (Pa), by the valve's
+        law Q ~ dp^n from its rated point (the turbulent, high-drop side of the law)."""
+        n, r = self.values["flow_exponent"], dp / self.values["rated_pressure_drop"]
+        return self.values["rated_flow"] * (math.sqrt(r) if n == 0.5 else r ** n)
+
     def lower(self, lw, a, spec, js):
         AP_ = lw.AP
         AP_[a, KV] = self.flow_coefficient

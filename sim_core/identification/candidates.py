@@ -135,9 +135,7 @@ def actuator_scales(spec, joint: str) -> dict:
     tree = spec.tree
     i = tree.index(js.dof)
     ps = spec.supply["pressure"]
-    v = js.components["valve"]
-    n, r = v["flow_exponent"], ps / v["rated_pressure_drop"]
-    q_full = v["rated_flow"] * (math.sqrt(r) if n == 0.5 else r ** n)       # the valve's flow law Q ~ dp^n
+    q_full = js.components["valve"].full_opening_flow(ps)
     if js.kind == "cylinder":
         cyl = js.components["cylinder"]
         arm = cyl.arms(tree, i, np.linspace(tree.lower[i], tree.upper[i], 50))
