@@ -7,9 +7,10 @@ per channel: 100 is perfect, 0 is no better than the mean, and it can be negativ
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs
 
 
 def nrmse_fit(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -30,12 +31,35 @@ def savgol_window(rate: float, seconds: float = 0.075, minimum: int = 5) -> int:
 
 
 def velocity(y: np.ndarray, dt: float, window: int | None = None) -> np.ndarray:
-    """Smoothed derivative (Savitzky-Golay, order 2): raw differences amplify sensor noise."""
+    """Smoothed derivative (Savitzky-Golay, order 2): raw differences amplify sensor noise.
+
+    The same numbers as ``scipy.signal.savgol_filter(y, w, 2, deriv=1, delta=dt)`` (mode 'interp':
+    the first and last w/2 samples from the polynomial fitted to the end windows), with the end fits
+    as fixed linear maps: the fits call this thousands of times, and scipy solves both end fits anew
+    on every call."""
     y = np.asarray(y, dtype=float)
     w = window or savgol_window(1.0 / dt)
     if y.size < w:
         return np.gradient(y, dt)
-    return savgol_filter(y, w, 2, deriv=1, delta=dt)
+    conv, left, right = _savgol_derivative(w, float(dt))
+    half = w // 2
+    out = np.convolve(y, conv, mode="same")
+    out[:half] = left @ y[:w]
+    out[-half:] = right @ y[-w:]
+    return out
+
+
+@lru_cache(maxsize=64)
+def _savgol_derivative(w: int, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Convolution taps of the order-2 Savitzky-Golay first derivative and the matrices mapping the
+    first and last ``w`` samples to the derivative of their least-squares parabola at the first and
+    last ``w // 2`` of them."""
+    half = w // 2
+    x = np.arange(w, dtype=float)
+    fit = np.linalg.pinv(np.vander(x, 3))             # samples -> (a, b, c) of a x^2 + b x + c
+    slope = lambda at: np.stack([2.0 * at, np.ones_like(at), np.zeros_like(at)], axis=1) @ fit / dt  # noqa: E731
+    conv = savgol_coeffs(w, 2, deriv=1, delta=dt)
+    return conv, slope(x[:half]), slope(x[w - half:])
 
 
 def noise_std(y: np.ndarray) -> float:

@@ -115,7 +115,10 @@ class Problem:
         """Per joint: NRMSE fit of angle, velocity and (recorded) pressures, and their score."""
         if not out.ok:
             return {j: {"angle": -math.inf, "velocity": -math.inf, "score": -math.inf} for j in self.joints}
-        sim = self.simulated(out)
+        return self.fits_of(self.simulated(out))
+
+    def fits_of(self, sim: dict[tuple[str, str], np.ndarray]) -> dict[str, dict[str, float]]:
+        """:meth:`fits` of channels already taken from a simulation (:meth:`simulated`)."""
         res: dict[str, dict[str, float]] = {}
         for j in self.joints:
             f = {"angle": nrmse_fit(self.meas[(j, "angle")], sim[(j, "angle")]),

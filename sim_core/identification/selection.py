@@ -154,6 +154,7 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
     """Standard deviation of the validation gain over re-drawn sensor noise (seeded, reproducible)."""
     rng = np.random.default_rng(12345)
     val = st.val
+    sim_c, sim_0 = val.simulated(out_c), val.simulated(out_0)    # the same channels in every draw
     gains = []
     for _ in range(draws):
         angles = {}
@@ -168,7 +169,7 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
         rec = Record("noise", val.rec.time[: val.n], val.rec.U[: val.n], angles, pressures, val.rec.joint_names,
                      val.rec.excited, val.rec.initial_pose)
         prob = oe.Problem(rec, val.joints, n=val.n, start=val.start, pressures=val.use_pressures)
-        fc, f0 = prob.fits(out_c), prob.fits(out_0)
+        fc, f0 = prob.fits_of(sim_c), prob.fits_of(sim_0)
         gains.append(np.mean([fc[j]["score"] - f0[j]["score"] for j in joints]))
     return float(np.std(gains))
 
