@@ -167,6 +167,37 @@ class _Budget(Exception):
     pass
 
 
+class _Converged(Exception):
+    """least_squares will stop after the step just taken: the Jacobian it asks for next is unused."""
+
+
+def lsq_terminates(x0, f0, J0, x1, f1, ftol: float, xtol: float, lower: float = 0.0, upper: float = 1.0) -> bool:
+    """Whether scipy's bounded 'trf' least_squares stops after its accepted step from ``x0`` (residual
+    ``f0``, Jacobian ``J0``) to ``x1`` (residual ``f1``): its ``check_termination`` on that step, the
+    ftol test with the step's ratio of actual to predicted reduction in its Coleman-Li scaled model
+    (``x_scale=1``), and the xtol test. scipy evaluates the Jacobian at ``x1`` before it stops; a fit
+    whose columns are simulations saves them by not computing it."""
+    cost = 0.5 * float(f0 @ f0)
+    actual = cost - 0.5 * float(f1 @ f1)
+    step = np.asarray(x1, dtype=float) - np.asarray(x0, dtype=float)
+    g = J0.T @ f0
+    v, dv = np.ones_like(step), np.zeros_like(step)
+    up, down = g < 0, g > 0
+    v[up], dv[up] = upper - x0[up], -1.0
+    v[down], dv[down] = x0[down] - lower, 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step_h = np.where(v > 0, step / np.sqrt(v), 0.0)
+    Js = J0 @ step
+    predicted = -(float(g @ step) + 0.5 * float(Js @ Js) + 0.5 * float(np.sum(g * dv * step_h ** 2)))
+    if predicted > 0:
+        ratio = actual / predicted
+    else:
+        ratio = 1.0 if predicted == actual == 0 else 0.0
+    ftol_met = actual < ftol * cost and ratio > 0.25
+    xtol_met = float(np.linalg.norm(step)) < xtol * (xtol + float(np.linalg.norm(x0)))
+    return ftol_met or xtol_met
+
+
 def forward_steps(x: np.ndarray, rel: float, lower: float = 0.0, upper: float = 1.0) -> np.ndarray:
     """The forward-difference steps scipy's least_squares takes for ``diff_step=rel`` within
     [lower, upper]: ``rel |x|`` (sqrt(eps) where that vanishes), turned inward at a bound, shortened to
@@ -231,11 +262,16 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         last.update(x=np.array(x, dtype=float), r=r)
         return r
 
+    accepted: dict = {}
+
     def jacobian(x):
         """least_squares' forward differences ('2-point', relative step DIFF_STEP, one-sided inside
-        the bounds), the columns simulated side by side; the budget and the best point as resid's."""
+        the bounds), the columns simulated side by side when ``side`` is given; the budget and the
+        best point as resid's. Not computed where least_squares stops after the step to ``x``."""
         x = np.asarray(x, dtype=float)
         f0 = last["r"] if "r" in last and np.array_equal(last["x"], x) else resid(x)
+        if accepted and lsq_terminates(accepted["x"], accepted["f"], accepted["J"], x, f0, tol, tol):
+            raise _Converged
         h = forward_steps(x, DIFF_STEP)
         cols = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
         budget = max_sims - sims[0]
@@ -248,13 +284,17 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                 ok.append(True)
             except ValueError:
                 ok.append(False)
-        outs = iter(side.simulate(runner, specs, problem.n))
+        if side is not None:
+            outs = iter(side.simulate(runner, specs, problem.n))
+        else:
+            outs = (runner.simulate(s, problem.n, owned=True) for s in specs)
         J = np.empty((f0.size, x.size))
         for i, (xi, good) in enumerate(zip(todo, ok)):
             r = scored(xi, next(outs)) if good else failed()
             J[:, i] = (r - f0) / (xi[i] - x[i])
         if len(todo) < len(cols):
             raise _Budget
+        accepted.update(x=x.copy(), f=f0, J=J)
         return J
 
     starts = [np.array([fp.to_x(v) for fp, v in zip(free, point)]) for point in grid or []]
@@ -285,12 +325,12 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         else:
             x_start = x0
         if free:
-            least_squares(resid, x_start, jac=jacobian if side is not None and len(free) > 1 else "2-point",
+            least_squares(resid, x_start, jac=jacobian,
                           bounds=(0.0, 1.0), method="trf", diff_step=DIFF_STEP, x_scale=1.0,
                           ftol=tol, xtol=tol, gtol=1e-8)
         else:
             resid(x0)
-    except _Budget:
+    except (_Budget, _Converged):
         pass
     x = best["x"]
     values = {fp.key: fp.from_x(float(xi)) for fp, xi in zip(free, x)}
