@@ -70,13 +70,16 @@ def _png(fig) -> str:
 
 
 FIGURES = ("angles", "residuals", "correlation", "spectrum")
+DRAWING_ORDER = ("spectrum", "correlation", "residuals", "angles")
 
 
 def all_plots(d: Diagnosis, joints: list[str], workers: int = 0) -> dict[str, dict[str, str]]:
     """Every figure of every joint, drawn side by side in forked processes (Agg drawing is single-threaded
     and a report's figures are independent: about half the time on two cores); ``workers`` 0: the CPU
     count, 1: here."""
-    jobs = [(j, name) for j in joints for name in FIGURES]
+    # the slowest figures first (the spectrum's log axis lays out the most text), so that the last
+    # figure to start is a short one
+    jobs = [(j, name) for name in sorted(FIGURES, key=DRAWING_ORDER.index) for j in joints]
     _pyplot()                      # imported once, before any fork: the children inherit it
     _FORKED["diagnosis"] = d       # inherited by the forked children, not pickled with every job
     try:
