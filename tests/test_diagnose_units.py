@@ -8,7 +8,7 @@ import pytest
 
 from sim_core.effects import EFFECTS, diagnosable
 from sim_core.identification.candidates import bank
-from sim_core.identification.metrics import fit_ceiling, noise_std, nrmse_fit
+from sim_core.identification.metrics import fit_ceiling, noise_std, nrmse_fit, savgol_window, velocity
 from sim_core.params_file import overrides
 from sim_core.identification.residual_tests import correlation_band, cross_correlation, ljung_box
 from sim_core.identification.signatures import joint_signatures
@@ -22,6 +22,20 @@ def test_nrmse_fit_is_matlabs_compare_fit():
     # 100 (1 - ||y - yhat|| / ||y - mean||) = 100 (1 - 1 / sqrt(5))
     assert nrmse_fit(y, yhat) == pytest.approx(100 * (1 - 1 / math.sqrt(5)))
     assert nrmse_fit(y, -y) < 0
+
+
+@pytest.mark.parametrize("n, dt, window", [(7200, 0.005, None), (3000, 0.02, None), (500, 0.001, 21), (9, 0.02, 9)])
+def test_velocity_is_scipys_savitzky_golay_derivative(n, dt, window):
+    """The smoothed velocity every fit compares is scipy's order-2 Savitzky-Golay derivative (mode
+    'interp': the end samples from the parabola fitted to the end window), ends included."""
+    from scipy.signal import savgol_filter
+
+    rng = np.random.default_rng(n)
+    t = np.arange(n) * dt
+    y = np.sin(3 * t) + 0.2 * t ** 2 + np.cumsum(rng.normal(0, 1e-3, n))
+    w = window or savgol_window(1.0 / dt)
+    ref = savgol_filter(y, w, 2, deriv=1, delta=dt)
+    np.testing.assert_allclose(velocity(y, dt, window), ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)))
 
 
 def test_noise_floor_estimates():
