@@ -51,18 +51,9 @@ def channel_spread(prob: oe.Problem, out, noise: dict[str, float], pnoise: dict[
     """Standard deviation of each channel's fit over re-drawn measurement noise."""
     rng = np.random.default_rng(2024)
     samples: dict[str, dict[str, list[float]]] = {}
+    sim = prob.simulated(out)       # the same channels in every draw
     for _ in range(NOISE_DRAWS):
-        angles, pressures = {}, {}
-        for j in prob.joints:
-            y = out.angles[j][: prob.n]
-            angles[j] = y + rng.normal(0.0, noise.get(j, 0.0), y.size)
-            if (j, "p_a") in prob.meas:
-                pa, pb = out.pressures[j]
-                s = pnoise.get(j, 0.0)
-                pressures[j] = (pa[: prob.n] + rng.normal(0, s, prob.n), pb[: prob.n] + rng.normal(0, s, prob.n))
-        rec = Record("noise", prob.rec.time[: prob.n], prob.rec.U[: prob.n], angles, pressures, prob.rec.joint_names,
-                     prob.rec.excited, prob.rec.initial_pose)
-        fits = oe.Problem(rec, prob.joints, n=prob.n, start=prob.start, pressures=prob.use_pressures).fits(out)
+        fits = prob.redrawn(out, noise, pnoise, rng).fits_of(sim)
         for j, f in fits.items():
             for c, v in f.items():
                 if c != "score":

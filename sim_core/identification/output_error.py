@@ -107,6 +107,22 @@ class Problem:
                     cost += self.weight[(j, ch)] * float(r @ r) / self.scale[(j, ch)] ** 2
         return cost, scales
 
+    def redrawn(self, out: Outputs, noise: dict[str, float], pressure_noise: dict[str, float], rng) -> "Problem":
+        """This problem measuring ``out``'s channels plus freshly drawn white sensor noise (standard
+        deviation per joint: ``noise`` in rad, ``pressure_noise`` in Pa): another record of the same
+        motion, to see how the fits spread over the noise."""
+        angles, pressures = {}, {}
+        for j in self.joints:
+            y = out.angles[j][: self.n]
+            angles[j] = y + rng.normal(0.0, noise.get(j, 0.0), y.size)
+            if (j, "p_a") in self.meas:
+                sp = pressure_noise.get(j, 0.0)
+                pa, pb = out.pressures[j]
+                pressures[j] = (pa[: self.n] + rng.normal(0.0, sp, self.n), pb[: self.n] + rng.normal(0.0, sp, self.n))
+        rec = Record("noise", self.rec.time[: self.n], self.rec.U[: self.n], angles, pressures, self.rec.joint_names,
+                     self.rec.excited, self.rec.initial_pose)
+        return Problem(rec, self.joints, n=self.n, start=self.start, pressures=self.use_pressures)
+
     def channel_residuals(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
         sim = self.simulated(out)
         return {k: self.meas[k] - sim[k] for k in self.meas}
@@ -214,6 +230,14 @@ def forward_steps(x: np.ndarray, rel: float, lower: float = 0.0, upper: float = 
     return h
 
 
+def _simulate_all(runner: Runner, specs: list, n: int, side=None) -> list[Outputs]:
+    """``runner.simulate`` of every spec (each the caller's own copy), side by side when ``side``
+    (:class:`.side_by_side.SideBySide`) is given."""
+    if side is not None:
+        return side.simulate(runner, specs, n)
+    return [runner.simulate(s, n, owned=True) for s in specs]
+
+
 def _spec_at(spec, free, x):
     s = spec.copy()
     for fp, xi in zip(free, x):
@@ -284,10 +308,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                 ok.append(True)
             except ValueError:
                 ok.append(False)
-        if side is not None:
-            outs = iter(side.simulate(runner, specs, problem.n))
-        else:
-            outs = (runner.simulate(s, problem.n, owned=True) for s in specs)
+        outs = iter(_simulate_all(runner, specs, problem.n, side))
         J = np.empty((f0.size, x.size))
         for i, (xi, good) in enumerate(zip(todo, ok)):
             r = scored(xi, next(outs)) if good else failed()
@@ -360,10 +381,7 @@ def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
         steps.append(h)
         specs.append(_spec_at(out.start_spec, out.free, xp))
     out.sims += k
-    if side is not None:
-        outs = side.simulate(runner, specs, problem.n)
-    else:
-        outs = [runner.simulate(s, problem.n, owned=True) for s in specs]
+    outs = _simulate_all(runner, specs, problem.n, side)
     for i, (h, o) in enumerate(zip(steps, outs)):
         J[:, i] = (problem.residuals(o) - r0) / h
     m = r0.size

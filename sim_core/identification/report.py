@@ -69,17 +69,16 @@ def _png(fig) -> str:
     return base64.b64encode(buf.getvalue()).decode()
 
 
-FIGURES = ("angles", "residuals", "correlation", "spectrum")
-DRAWING_ORDER = ("spectrum", "correlation", "residuals", "angles")
+# drawn in this order, the slowest first (the spectrum's log axis lays out the most text), so that
+# the last figure to start is a short one; the page shows them in its own order
+FIGURES = ("spectrum", "correlation", "residuals", "angles")
 
 
 def all_plots(d: Diagnosis, joints: list[str], workers: int = 0) -> dict[str, dict[str, str]]:
     """Every figure of every joint, drawn side by side in forked processes (Agg drawing is single-threaded
     and a report's figures are independent: about half the time on two cores); ``workers`` 0: the CPU
     count, 1: here."""
-    # the slowest figures first (the spectrum's log axis lays out the most text), so that the last
-    # figure to start is a short one
-    jobs = [(j, name) for name in sorted(FIGURES, key=DRAWING_ORDER.index) for j in joints]
+    jobs = [(j, name) for name in FIGURES for j in joints]
     _pyplot()                      # imported once, before any fork: the children inherit it
     _FORKED["diagnosis"] = d       # inherited by the forked children, not pickled with every job
     try:
@@ -468,7 +467,8 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
     u = data.get("unexplained")
     if u:
         lines += ["Unexplained: " + "; ".join(u["because"]) + ".", ""]
-        lines += [f"In the record: {cause}." for cause in u.get("record_causes", [])] + ([""] if u.get("record_causes") else [])
+        if u.get("record_causes"):
+            lines += [f"In the record: {cause}." for cause in u["record_causes"]] + [""]
         for c in u.get("closest", []):
             lines.append(f"- closest: {c['effect']}" + (f" on {c['joint']}" if c["joint"] else "")
                          + f", gain {c['gain']:+.2f} points{_share(c)}")

@@ -38,7 +38,6 @@ from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFIC
                        backward as _backward, forward, judge, member_evaluations, pairs_after_a_drop)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
-from .record import Record
 from .simulation import Outputs, Runner
 
 __all__ = ["AMBIGUITY", "MAX_EFFECTS", "MAX_PAIRS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
@@ -157,18 +156,7 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
     sim_c, sim_0 = val.simulated(out_c), val.simulated(out_0)    # the same channels in every draw
     gains = []
     for _ in range(draws):
-        angles = {}
-        pressures = {}
-        for j in val.joints:
-            y = out_c.angles[j][: val.n]
-            angles[j] = y + rng.normal(0.0, st.noise.get(j, 0.0), y.size)
-            if j in out_c.pressures and (j, "p_a") in val.meas:
-                sp = st.pressure_noise.get(j, 0.0)
-                pa, pb = out_c.pressures[j]
-                pressures[j] = (pa[: val.n] + rng.normal(0.0, sp, val.n), pb[: val.n] + rng.normal(0.0, sp, val.n))
-        rec = Record("noise", val.rec.time[: val.n], val.rec.U[: val.n], angles, pressures, val.rec.joint_names,
-                     val.rec.excited, val.rec.initial_pose)
-        prob = oe.Problem(rec, val.joints, n=val.n, start=val.start, pressures=val.use_pressures)
+        prob = val.redrawn(out_c, st.noise, st.pressure_noise, rng)
         fc, f0 = prob.fits_of(sim_c), prob.fits_of(sim_0)
         gains.append(np.mean([fc[j]["score"] - f0[j]["score"] for j in joints]))
     return float(np.std(gains))
