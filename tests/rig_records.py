@@ -69,5 +69,17 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     return np.array(rows)[::log_every], spec
 
 
+def as_record(spec, rows: np.ndarray, source: str = "log"):
+    """The logged rows as the diagnosis reads them: the position from the sensor volts by the rig's
+    own sensor model (A raw + B), without the CSV round trip of ``hydrohil import``."""
+    from sim_core.dataset import Dataset
+    from sim_core.identification.record import record_from_dataset
+
+    j = spec.joint_names[0]
+    A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
+    ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
+    return record_from_dataset(ds, spec, source=source)
+
+
 def write_headerless(rows: np.ndarray, path) -> None:
     np.savetxt(path, rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])

@@ -291,7 +291,7 @@ def test_the_refit_after_a_drop_reaches_the_optimum_of_what_it_keeps(cli, tmp_pa
     optimum (a reference fit started there, with a large budget and tight tolerances, may not lower
     the cost by more than 0.1 %; an under-converged refit left 0.3-0.5 % and handed the rest of the
     convergence to every candidate as a spurious gain)."""
-    from rig_records import closed_loop_record
+    from rig_records import as_record, closed_loop_record
 
     cli("rig", "new", template, "--out", tmp_path / "rig", check=True)
     spec = load_robot(tmp_path / "rig")
@@ -300,9 +300,7 @@ def test_the_refit_after_a_drop_reaches_the_optimum_of_what_it_keeps(cli, tmp_pa
     span = float(spec.tree.upper[i] - spec.tree.lower[i])
     rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, seed=2, duration=60.0, start_offset=0.05 * span,
                                  off={f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85})
-    A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
-    ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
-    rec = record_from_dataset(ds, spec, source="log")
+    rec = as_record(spec, rows)
     m = model_spec(spec)
     pl = plan(m, rec)
     est = oe.Problem(rec, rec.targets, n=int(rec.n * 0.6))
@@ -319,17 +317,15 @@ def test_candidates_refit_a_rigs_estimated_parameters_within_the_specs_range(cli
     """The user's ranges hold for every fit, not only the calibration's: a candidate refits an
     estimated rig parameter within its range even where the calibration left it on a bound (the
     default x/÷ 3 around the calibrated value would leave the range)."""
-    from rig_records import closed_loop_record
+    from rig_records import as_record, closed_loop_record
     from sim_core.identification.selection import free_list
 
     cli("rig", "new", "boom", "--out", tmp_path / "rig", check=True)
     spec = load_robot(tmp_path / "rig")
     j = spec.joint_names[0]
     rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, off={}, seed=1, duration=5.0)
-    A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
-    ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
     m = model_spec(spec)
-    pl = plan(m, record_from_dataset(ds, spec, source="log"))
+    pl = plan(m, as_record(spec, rows))
     ranges = {fp.key: fp for fp in pl.free if "estimated" in pl.why[fp.key]}
     keys = list(ranges)
     calibrated = m.copy()

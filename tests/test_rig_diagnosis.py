@@ -10,14 +10,11 @@ is named with its parameter within 15 % on every template; a clean record is no_
 
 import json
 
-import numpy as np
 import pytest
 
-from rig_records import closed_loop_record, write_headerless
-from sim_core.dataset import Dataset
+from rig_records import as_record, closed_loop_record, write_headerless
 from sim_core.identification.calibration import plan
 from sim_core.identification.candidates import actuator_scales
-from sim_core.identification.record import record_from_dataset
 from sim_core.model.spec import load_robot
 from sim_core.rigs import TEMPLATES
 
@@ -106,9 +103,7 @@ def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli)
     nominal = spec.get(f"joints.{j}.sensor.B")
     assert max(hi - nominal, nominal - lo) > 0.5      # the premise
     rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, off={}, seed=1, duration=5.0)
-    A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
-    ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
-    rec = record_from_dataset(ds, spec, source="log")
+    rec = as_record(spec, rows)
     m = spec.copy()
     fp = next(f for f in plan(m, rec).free if f.key == f"effects.sensor_offset.{j}.offset")
     assert -0.5 <= fp.lower < 0.0 < fp.upper <= 0.5

@@ -199,9 +199,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if not fast.simulate(m0, est.n).ok:
         raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
                          f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
-    nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
-    uncalibrated = {fp.key: fp.get(m0) for fp in pl.free if fp.key in nuisance}
     cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
+    nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
     for c in cal.changes:
         if not c["identified"]:
@@ -262,7 +261,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         noise = {j: check.noise[j] for j in targets}
     st = Setting(fast, est, vfast, vprob, keys, noise, pn_val,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures),
-                 ranges={fp.key: fp for fp in pl.free if fp.key in nuisance}, uncalibrated=uncalibrated)
+                 ranges={fp.key: fp for fp in pl.free if fp.key in nuisance},
+                 uncalibrated={c["parameter"]: c["nominal"] for c in cal.changes if c["parameter"] in nuisance})
     # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
                  recalibrate=recalibrate,
