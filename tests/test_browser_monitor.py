@@ -12,6 +12,7 @@ import time
 import httpx
 import numpy as np
 import pytest
+from viser import GuiEvent
 from web_helpers import (CHROMIUM, CHROMIUM_ARGS, InProcessServer, artifacts_dir, changed, dismiss_notifications,
                          open_page, project, region_mask, require_chromium, settled_screenshot, wait_for)
 
@@ -183,6 +184,34 @@ def test_a_state_read_before_the_operator_moved_the_slider_does_not_move_it_back
     assert m.panel.sliders["j3"].value == 0.0
     m.page.get_by_role("button", name="Neutral j3", exact=True).click()
     wait_for(lambda: svc.documents.state()["joints"]["j3"]["requested_voltage"] == 0.0, 15, "neutral on j3")
+
+
+def test_a_slider_move_whose_callback_has_not_run_yet_is_not_put_back(hydrolek):
+    """viser stores the browser's new slider value, then runs the panel's callback on a thread pool: a
+    render in between keeps that value (putting it back would make the callback send the old command);
+    a value whose callback never comes gives way to the plant's command after the hold-off."""
+    m, svc = hydrolek, hydrolek.server.svc
+    panel, slider = m.panel, m.panel.sliders["j5"]
+    with httpx.Client(base_url=m.server.url, timeout=10) as c:     # another source holds j5 at 0.5 V
+        c.put("/api/v1/commands", json={"voltages": {"j5": 0.5}}).raise_for_status()
+    wait_for(lambda: slider.value == pytest.approx(0.5), 15, "the slider to follow the REST command")
+    client = next(iter(panel.server.get_clients().values()))
+
+    slider._impl.value = 0.75           # what viser's message handler does before submitting the callback
+    panel._sync_sliders(svc.documents.state(), time.monotonic())
+    assert slider.value == pytest.approx(0.75)
+    panel._slider_cb("j5")(GuiEvent(client, client.client_id, slider))    # the callback, late
+    wait_for(lambda: svc.documents.state()["joints"]["j5"]["requested_voltage"] == pytest.approx(0.75), 15,
+             "the plant to receive the operator's value")
+
+    with httpx.Client(base_url=m.server.url, timeout=10) as c:
+        c.put("/api/v1/commands", json={"voltages": {"j5": 0.5}}).raise_for_status()
+    wait_for(lambda: slider.value == pytest.approx(0.5), 15, "the slider to follow the REST command again")
+    slider._impl.value = -0.25          # a browser value whose callback never comes
+    wait_for(lambda: slider.value == pytest.approx(0.5), 3 * HOLD_OFF_S + 5, "the plant's command to win")
+    assert svc.documents.state()["joints"]["j5"]["requested_voltage"] == pytest.approx(0.5)
+    m.page.get_by_role("button", name="Neutral j5", exact=True).click()
+    wait_for(lambda: svc.documents.state()["joints"]["j5"]["requested_voltage"] == 0.0, 15, "neutral on j5")
 
 
 def test_estop_in_the_page_neutralises_every_valve(hydrolek):

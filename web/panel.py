@@ -70,6 +70,8 @@ class OperatorPanel:
         self._lock = threading.Lock()
         self._command_lock = threading.Lock()   # slider read + send, one at a time
         self._touched: dict[str, float] = {}
+        self._known: dict[str, float] = {}    # each slider's value (V) as the panel last set or sent it
+        self._unsent: dict[str, float] = {}   # since when (monotonic s) a slider holds a value not yet sent
         self._held: dict[str, float] = {}     # joints this panel commands away from neutral
         self._estop = False
         self._last_plot = 0.0
@@ -201,6 +203,7 @@ class OperatorPanel:
             if ev.client is None:  # the panel itself set the value (sync, E-STOP): not an operator command
                 return
             if self._refuse(ev.client):
+                self._known[j] = float(self.sliders[j].value)   # seen: the sync puts it back
                 return
             with self._lock:   # before the command goes out: a state read earlier must not undo it
                 self._touched[j] = time.monotonic()
@@ -209,6 +212,7 @@ class OperatorPanel:
             # an older value cannot overtake it)
             with self._command_lock:
                 v = float(self.sliders[j].value)
+                self._known[j] = v
                 if self._estop:
                     self._set_slider(j, 0.0)
                     self.notify("E-STOP is engaged: release it before commanding.", client=ev.client)
@@ -294,7 +298,8 @@ class OperatorPanel:
 
     def _set_slider(self, j: str, v: float) -> None:
         lo, hi = self.ranges[j]
-        self.sliders[j].value = float(np.clip(round(v / STEP_V) * STEP_V, lo, hi))
+        self._known[j] = float(np.clip(round(v / STEP_V) * STEP_V, lo, hi))
+        self.sliders[j].value = self._known[j]
 
     def _apply_estop(self, on: bool) -> None:
         if on == self._estop:
@@ -337,7 +342,10 @@ class OperatorPanel:
 
     def _sync_sliders(self, state: dict, fetched_at: float) -> None:
         """Follow the plant's command, unless the operator touched the slider less than HOLD_OFF_S
-        before the state was read (or after: a state read before a touch predates its command)."""
+        before the state was read (or after: a state read before a touch predates its command), or the
+        slider holds a value the panel neither set nor sent (for up to HOLD_OFF_S): viser stores the browser's new value before
+        the slider callback runs on its thread pool, and putting the slider back in between would make
+        that callback send the old command."""
         for j in self.joints:
             js = state["joints"].get(j)
             if not js or js.get("source") == "viewer" and self.link.kind == "local":
@@ -345,8 +353,14 @@ class OperatorPanel:
             with self._lock:
                 if fetched_at - self._touched.get(j, -1e9) < HOLD_OFF_S:
                     continue
+            value, known = self.sliders[j].value, self._known.get(j, 0.0)
+            if abs(value - known) > STEP_V / 2:   # the operator's move, its callback still to come
+                since = self._unsent.setdefault(j, time.monotonic())
+                if time.monotonic() - since < HOLD_OFF_S:
+                    continue
+            self._unsent.pop(j, None)           # (a callback that never came: the plant's command wins)
             req = float(js.get("requested_voltage", 0.0))
-            if abs(self.sliders[j].value - req) > STEP_V / 2:
+            if abs(value - req) > STEP_V / 2 or abs(value - known) > STEP_V / 2:
                 self._set_slider(j, req)
 
     def _update_plots(self, force: bool = False) -> None:
