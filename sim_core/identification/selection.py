@@ -38,6 +38,7 @@ from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFIC
                        backward as _backward, forward, judge, member_evaluations, pairs_after_a_drop)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
+from .side_by_side import SideBySide
 from .simulation import Outputs, Runner
 
 __all__ = ["AMBIGUITY", "MAX_EFFECTS", "MAX_PAIRS", "NOISE_FACTOR", "SIGNIFICANCE", "THRESHOLD_POINTS", "Evaluation", "Selection",
@@ -338,11 +339,24 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         log(f"round {r}: no single candidate passed; fitting {len(pairs)} pairs jointly")
         return evaluate_round([pair_candidate(a, b) for a, b in pairs], model, accepted, r)
 
-    fw = forward(cands, base_spec, evaluate_round=evaluate_round,
-                 extend=lambda model, ev: _extend(model, ev, recalibrate),
-                 score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
-                 evaluate_pairs=None if misfit is None else evaluate_pairs,
-                 misfit=None if misfit is None else (lambda model: misfit(base.outputs(model))))
+    added: list[tuple[Candidate, dict]] = []     # what forward selection put into the model so far
+    side = SideBySide(workers if backend is None else 1)
+
+    def extend(model, ev):
+        added.append((ev.candidate, {}))
+        extended = _extend(model, ev, recalibrate)
+        polished, scores = _polished(st, extended, added, base, side)
+        if scores is not None:
+            log(f"refitted the model with {ev.candidate.label}: validation score {scores[0]:.2f} -> {scores[1]:.2f}")
+        return polished
+
+    try:
+        fw = forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
+                     score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
+                     evaluate_pairs=None if misfit is None else evaluate_pairs,
+                     misfit=None if misfit is None else (lambda model: misfit(base.outputs(model))))
+    finally:
+        side.close()
     model, accepted = fw.model, fw.accepted
     if len(accepted) >= 2:
         def refit_without(model, ev, rest):
@@ -384,6 +398,24 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 def _extend(model, ev: Evaluation, recalibrate):
     extended = model_with(model, [], ev.candidate, ev.values)
     return extended if recalibrate is None else recalibrate(extended, ev)
+
+
+def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: "_Baseline", side: SideBySide):
+    """``model`` with its own parameters (the accepted effects' and the calibration's) refitted the way
+    each candidate of the next round refits them: from their values and, for a rig's nuisances, from
+    their values before calibration, with the candidates' budget. Without it the next round credits
+    every candidate alike with what this refit alone finds (the accepted fit stopped on its budget, or
+    the other start holds a better optimum). Kept where it scores higher on the validation data:
+    returns the model and (score before, score after), or the model unchanged and None."""
+    free = free_list(model, None, accepted, st.calib_keys, st.ranges)
+    x0 = [fp.get(model) for fp in free]
+    uncal = [st.uncalibrated.get(fp.key, v) for fp, v in zip(free, x0)]
+    res = oe.fit(st.est_runner, st.est, model, free, grid=[x0] + ([uncal] if uncal != x0 else []),
+                 grid_problem=st.grid, max_sims=st.max_sims, uncertainty=False, tol=1e-3, side=side)
+    if not res.ok or res.spec is None:
+        return model, None
+    before, after = base.score(model), base.score(res.spec)
+    return (res.spec, (before, after)) if after > before else (model, None)
 
 
 class _Baseline:
