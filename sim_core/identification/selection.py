@@ -12,7 +12,8 @@ pressures) over the current model. A candidate is accepted when
 * its parameters are identified: none ends on a search bound other than the one where the effect
   vanishes, and at least one differs from "no effect" by more than 3 standard deviations.
 
-The best accepted candidate joins the model (greedy forward selection); the next round refits every
+The best accepted candidate joins the model (greedy forward selection) and the model's own
+parameters are refitted as the candidates will refit them; the next round refits every
 remaining candidate jointly with everything accepted (a large effect masks the others, so first-round
 gains are no guide), and stops when nothing passes or when the score is within the threshold of its
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
