@@ -70,8 +70,7 @@ class OperatorPanel:
         self._lock = threading.Lock()
         self._command_lock = threading.Lock()   # slider read + send, one at a time
         self._touched: dict[str, float] = {}
-        self._known: dict[str, float] = {}    # each slider's value (V) as the panel last set or sent it
-        self._unsent: dict[str, float] = {}   # since when (monotonic s) a slider holds a value not yet sent
+        self._known: dict[str, float] = {}    # each slider's value (V) as the panel last set, sent or saw it
         self._held: dict[str, float] = {}     # joints this panel commands away from neutral
         self._estop = False
         self._last_plot = 0.0
@@ -342,25 +341,24 @@ class OperatorPanel:
 
     def _sync_sliders(self, state: dict, fetched_at: float) -> None:
         """Follow the plant's command, unless the operator touched the slider less than HOLD_OFF_S
-        before the state was read (or after: a state read before a touch predates its command), or the
-        slider holds a value the panel neither set nor sent (for up to HOLD_OFF_S): viser stores the browser's new value before
-        the slider callback runs on its thread pool, and putting the slider back in between would make
-        that callback send the old command."""
+        before the state was read (or after: a state read before a touch predates its command). A
+        slider holding a value the panel neither set nor sent is such a touch: viser stores the
+        browser's new value before the slider callback runs on its thread pool, and putting the slider
+        back in between would make that callback send the old command (a callback that never comes
+        leaves the slider to the plant's command once the hold-off is over)."""
         for j in self.joints:
             js = state["joints"].get(j)
             if not js or js.get("source") == "viewer" and self.link.kind == "local":
                 continue
+            value = self.sliders[j].value
             with self._lock:
+                if abs(value - self._known.get(j, 0.0)) > STEP_V / 2:
+                    self._known[j] = value
+                    self._touched[j] = time.monotonic()
                 if fetched_at - self._touched.get(j, -1e9) < HOLD_OFF_S:
                     continue
-            value, known = self.sliders[j].value, self._known.get(j, 0.0)
-            if abs(value - known) > STEP_V / 2:   # the operator's move, its callback still to come
-                since = self._unsent.setdefault(j, time.monotonic())
-                if time.monotonic() - since < HOLD_OFF_S:
-                    continue
-            self._unsent.pop(j, None)           # (a callback that never came: the plant's command wins)
             req = float(js.get("requested_voltage", 0.0))
-            if abs(value - req) > STEP_V / 2 or abs(value - known) > STEP_V / 2:
+            if abs(value - req) > STEP_V / 2:
                 self._set_slider(j, req)
 
     def _update_plots(self, force: bool = False) -> None:

@@ -71,6 +71,11 @@ class Setting:
     ranges: dict[str, FreeParameter] = field(default_factory=dict)
     uncalibrated: dict[str, float] = field(default_factory=dict)
 
+    def before_calibration(self, free: list[FreeParameter], values: list[float]) -> list[float]:
+        """``values`` (of ``free``, in order) with the spec's estimated parameters at their values
+        before calibration: the second start of every refit of the calibrated parameters."""
+        return [self.uncalibrated.get(fp.key, v) for fp, v in zip(free, values)]
+
 
 def model_with(base_spec, accepted: list[tuple[Candidate, dict]], cand: Candidate | None, values: dict[str, float]):
     """``base_spec`` with the accepted candidates and ``cand`` switched on and ``values`` applied."""
@@ -117,7 +122,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     free = free_list(s0, cand, accepted, st.calib_keys, st.ranges)
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
     grid = [list(p) + rest for p in cand.grid]
-    uncal = [st.uncalibrated.get(fp.key, v) for fp, v in zip(free[len(cand.free):], rest)]
+    uncal = st.before_calibration(free[len(cand.free):], rest)
     if uncal != rest:
         grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
@@ -410,7 +415,7 @@ def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: 
     returns the model and (score before, score after), or the model unchanged and None."""
     free = free_list(model, None, accepted, st.calib_keys, st.ranges)
     x0 = [fp.get(model) for fp in free]
-    uncal = [st.uncalibrated.get(fp.key, v) for fp, v in zip(free, x0)]
+    uncal = st.before_calibration(free, x0)
     res = oe.fit(st.est_runner, st.est, model, free, grid=[x0] + ([uncal] if uncal != x0 else []),
                  grid_problem=st.grid, max_sims=st.max_sims, uncertainty=False, tol=1e-3, side=side)
     if not res.ok or res.spec is None:
