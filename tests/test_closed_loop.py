@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from sim_core.dataset import write_csv
-from sim_core.identification.closed_loop import CORRELATION_LIMIT, joint_evidence
+from sim_core.identification import output_error as oe
+from sim_core.identification.closed_loop import CORRELATION_LIMIT, RESTART_TAUS, joint_evidence, time_constant
+from sim_core.identification.record import Record
 from sim_core.model.spec import load_robot
 
 from closed_loop_sim import closed_loop_columns, open_loop_columns
@@ -51,6 +53,57 @@ def test_feedback_one_sample_late_and_saturated():
     assert ev["closed_loop"] and ev["lag_samples"] == 1 and ev["gain"] == pytest.approx(40.0, rel=0.05)
 
 
+def _integrator_loop(kp: float, speed_per_volt: float, dt: float = 0.02, n: int = 3000, seed: int = 0):
+    """A joint whose speed is ``speed_per_volt`` x command under ``u = kp (r - y)``, set points held 3 s."""
+    rng = np.random.default_rng(seed)
+    r = np.repeat(rng.uniform(-0.3, 0.3, n // 150 + 1), 150)[:n]
+    y, u = np.zeros(n), np.zeros(n)
+    for k in range(1, n):
+        u[k] = np.clip(kp * (r[k] - y[k - 1]), -10, 10)
+        y[k] = y[k - 1] + speed_per_volt * dt * u[k] + rng.normal(0, 5e-4)
+    return u, y
+
+
+@pytest.mark.parametrize("kp,speed_per_volt", [(40.0, 0.1), (10.0, 0.1), (40.0, 0.02)])
+def test_the_loop_time_constant_is_one_over_gain_times_speed_per_volt(kp, speed_per_volt):
+    u, y = _integrator_loop(kp, speed_per_volt)
+    ev = joint_evidence(u, y, (-10.0, 10.0))
+    tau = time_constant(u, y, 0.02, ev["gain"], (-10.0, 10.0))
+    assert tau == pytest.approx(1.0 / (kp * speed_per_volt), rel=0.1)
+
+
+def test_restarted_angle_fits_score_the_motion_not_an_integrated_bias():
+    """On a closed-loop record, a model whose flow is biased drifts without end when replayed open loop;
+    restarted from the record every window, its angle error stays within bias x window, so a model with
+    the right motion and a small bias outscores one with a lag on the restarted channel, while over the
+    whole record (the angle channel) the bias's drift outweighs the lag. Both channels enter the score."""
+    dt, n = 0.02, 3000
+    u, y = _integrator_loop(40.0, 0.1, dt=dt, n=n, seed=3)
+    t = np.arange(n) * dt
+    rec = Record("loop", t, u[:, None], {"j": y}, {}, ["j"], ["j"], {"j": 0.0})
+    prob = oe.Problem(rec, ["j"], start=1800).restarting(50)
+    truth = np.cumsum(0.1 * dt * u)
+    drifting = truth + 0.004 * t                                   # 4 mrad/s of flow bias
+    lagging = np.cumsum(0.1 * dt * np.r_[np.zeros(5), u[:-5]])     # 100 ms late
+
+    def fits(sim):
+        return prob.fits_of({("j", "angle"): sim[1800:], ("j", "velocity"): y[1800:]})["j"]
+
+    assert fits(drifting)["angle"] < fits(lagging)["angle"]
+    assert fits(drifting)["restarted"] > fits(lagging)["restarted"]
+    f = fits(lagging)
+    assert f["score"] == pytest.approx((f["angle"] + f["restarted"] + f["velocity"]) / 3)
+    # restarted, the biased model's error is what the bias adds within one window (1 s) plus noise
+    resid = y[1800:] - prob.restarted("j", drifting[1800:])
+    assert np.max(np.abs(resid)) < 0.004 * 1.0 + 0.01
+    # the noise-free motion keeps a fit near the noise ceiling when restarted (the record's noise is a
+    # random walk, which the whole-record angle carries too)
+    assert fits(truth)["restarted"] > 90.0
+    # an open-loop problem has no restarted channel
+    assert "restarted" not in oe.Problem(rec, ["j"], start=1800).fits_of(
+        {("j", "angle"): truth[1800:], ("j", "velocity"): y[1800:]})["j"]
+
+
 def test_diagnose_reports_a_closed_loop_record(cli, tmp_path):
     spec = load_robot("hydrolek")
     cols = closed_loop_columns(spec, "j2", kp=15.0, duration=30.0, seed=3)
@@ -64,5 +117,8 @@ def test_diagnose_reports_a_closed_loop_record(cli, tmp_path):
     assert ev["closed_loop"] and ev["gain"] == pytest.approx(15.0, rel=0.05)
     assert "delay shows as phase" in d["closed_loop_evidence"]["note"]
     assert any("closed loop" in n for n in d["data"]["notes"])
+    # its validation angle restarts from the record every RESTART_TAUS loop time constants
+    assert ev["time_constant_s"] > 0
+    assert d["validation"]["angle_restart_s"] == pytest.approx(RESTART_TAUS * ev["time_constant_s"], rel=0.02)
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "Closed-loop record" in html and "limit" in html

@@ -132,6 +132,7 @@ def test_separate_validation_record(cli, tmp_path):
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     assert d["validation"]["source"].endswith("val.csv") and d["validation"]["first_sample"] == 0
     assert d["validation"]["samples"] == len(read_csv(other / "val.csv"))
+    assert d["validation"]["angle_restart_s"] is None        # open loop: scored over the whole replay
     assert (d["selected"][0]["effect"], d["selected"][0]["joint"]) == ("delay", joint)
     assert d["selected"][0]["params"]["delay"] == pytest.approx(vals["delay"], rel=0.10)
 

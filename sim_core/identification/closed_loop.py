@@ -19,17 +19,27 @@ The command is replayed held from one logged sample to the next, which is what t
 when the controller ran at the log's rate: a faster controller's reference steps fall between
 samples, and the replay starts each move up to one period late, an error an open-loop replay
 carries to the end of the record.
+
+The same replay carries any flow bias the calibration left (a supply or load it could not identify)
+to the end of the record, while the real loop pulled that error back within a few of its time
+constants; so on such a record the validation score also takes the angle fit restarted from the
+recorded position every ``RESTART_TAUS`` loop time constants: what the model predicts over the loop's
+own horizon. The whole-record angle stays in the score: a leak's evidence on a position-only record
+is that very drift. The time constant is ``1 / (K G)``, with ``K`` the loop gain above and ``G`` the
+joint's speed per volt of command (regressed from the record).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .metrics import velocity
 from .record import Record
 
 MAX_LAG = 2               # samples between the reading and the command it causes
 JUMP_QUANTILE = 0.95      # command increments above this quantile of |du| are left out (steps, switches)
 CORRELATION_LIMIT = -0.5  # correlation of du and dy at or below this: feedback
+RESTART_TAUS = 4.0        # loop time constants per validation window (an error decays to 2 % in 4)
 
 NOTE = ("the record was taken in closed loop ({joints}): the command follows -K (q - r) with a smooth reference r. "
         "The recorded command is what the valve saw and stays the model's input; but a delay shows as phase (a lag "
@@ -80,6 +90,36 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
     return best
 
 
+def time_constant(u: np.ndarray, y: np.ndarray, dt: float, gain: float,
+                  command_range: tuple[float, float] | None = None) -> float | None:
+    """Time constant (s) of the position loop ``u = K (r - y)`` around a joint whose speed is about
+    ``G u``: ``1 / (K G)``, ``G`` the least-squares slope of the record's smoothed velocity on its
+    command (an offset allowed) where the command is inside its range. None where that is not positive."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    v = velocity(y, dt)
+    keep = np.ones(u.size, dtype=bool)
+    if command_range is not None:
+        lo, hi = command_range
+        span = 1e-6 * max(hi - lo, 1.0)
+        keep = (u > lo + span) & (u < hi - span)
+    if keep.sum() < 10 or gain <= 0:
+        return None
+    uc = u[keep] - u[keep].mean()
+    den = float(uc @ uc)
+    if den <= 0:
+        return None
+    g = float(uc @ v[keep]) / den
+    return 1.0 / (gain * g) if g > 0 else None
+
+
+def validation_window(evidence: dict) -> float | None:
+    """Seconds between the validation angle's restarts from the record: ``RESTART_TAUS`` time constants
+    of the slowest closed loop (None: no closed loop, or none whose time constant the record gives)."""
+    taus = [e["time_constant_s"] for e in evidence.get("joints", {}).values()
+            if e.get("closed_loop") and e.get("time_constant_s")]
+    return RESTART_TAUS * max(taus) if taus else None
+
+
 def _unit(spec, joint: str) -> str:
     if spec is None:
         return "V per rad (or m)"
@@ -94,6 +134,9 @@ def detect(rec: Record, spec=None) -> dict:
     with the note for the report."""
     ranges = {j: (spec.joint(j).command_range if spec is not None else None) for j in rec.targets}
     joints = {j: joint_evidence(rec.u(j), rec.angles[j], ranges[j]) for j in rec.targets}
+    for j, e in joints.items():
+        if e["closed_loop"]:
+            e["time_constant_s"] = time_constant(rec.u(j), rec.angles[j], rec.dt, e["gain"], ranges[j])
     closed = [j for j, e in joints.items() if e["closed_loop"]]
     out = {"closed_loop": bool(closed), "joints": joints,
            "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import output_error as oe
 from .calibration import calibrate, plan
-from .closed_loop import HELD_REPLAY, detect as detect_closed_loop
+from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
 from .decision import FAR_POINTS, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
@@ -71,6 +71,7 @@ class Diagnosis:
     unexplained: dict = field(default_factory=dict)   # why and where the record is left unexplained
     pairs: list[dict] = field(default_factory=list)   # the masked-pair fits, when a pair search ran
     channel_ceilings: dict = field(default_factory=dict)   # joint -> channel -> noise ceiling (fit, %)
+    restart_s: float | None = None   # the validation angle restarts from the record this often (closed loop)
 
     @property
     def verdict(self) -> str:
@@ -95,7 +96,8 @@ class Diagnosis:
             "pairs": self.pairs,
             "decision": {
                 "gain": "validation gain of the joint's score: mean NRMSE fit (percent) of angle, velocity and, "
-                        "when recorded, chamber pressures",
+                        "when recorded, chamber pressures; on a closed-loop record also of the angle restarted from "
+                        "the record every validation.angle_restart_s ('restarted')",
                 "threshold_points": THRESHOLD_POINTS, "noise_factor": NOISE_FACTOR,
                 "score_ceiling": self.ceiling, "stopped": self.stopped,
                 "channel_ceilings": self.channel_ceilings,
@@ -104,7 +106,8 @@ class Diagnosis:
                 "far_points": FAR_POINTS,
             },
             "validation": {"source": self.validation.source, "first_sample": self.split,
-                           "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split)},
+                           "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split),
+                           "angle_restart_s": self.restart_s},
             "calibration": self.calibration,
             "closed_loop": bool(self.closed_loop.get("closed_loop", False)),
             "closed_loop_evidence": self.closed_loop,
@@ -119,6 +122,7 @@ class Diagnosis:
 
 
 MAX_ESTIMATION_SAMPLES = 24000   # longer records are fitted on their first 24000 samples (cost per fit)
+MIN_WINDOW_SAMPLES = 10   # a restart anchors on the smoothed reading (5 samples at 50 Hz): windows are longer
 
 
 def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
@@ -237,6 +241,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     loop = detect_closed_loop(rec, spec)
     if loop["closed_loop"]:
         notes.append(loop["note"])
+        window = validation_window(loop)
+        if window is not None and window * vrec.rate < vprob.n - vprob.start:
+            vprob = vprob.restarting(max(MIN_WINDOW_SAMPLES, int(round(window * vrec.rate))))
     timings["baseline"] = time.perf_counter() - t_start
 
     # screening on the estimation data
@@ -384,7 +391,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
-                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings)
+                     {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings,
+                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None)
 
 
 def _score(fits: dict, joints: list[str]) -> float:

@@ -49,6 +49,15 @@ def velocity(y: np.ndarray, dt: float, window: int | None = None) -> np.ndarray:
     return out
 
 
+def smoothed(y: np.ndarray, dt: float, window: int | None = None) -> np.ndarray:
+    """The signal through the same Savitzky-Golay filter (order 2) as :func:`velocity`, not differentiated."""
+    from scipy.signal import savgol_filter
+
+    y = np.asarray(y, dtype=float)
+    w = window or savgol_window(1.0 / dt)
+    return y.copy() if y.size < w else savgol_filter(y, w, 2)
+
+
 @lru_cache(maxsize=64)
 def _savgol_derivative(w: int, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Convolution taps of the order-2 Savitzky-Golay first derivative and the matrices mapping the

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .metrics import effective_samples, nrmse_fit, velocity
+from .metrics import effective_samples, nrmse_fit, smoothed, velocity
 from .parameters import FreeParameter
 from .record import Record
 from .simulation import Outputs, Runner
@@ -30,8 +30,9 @@ class Problem:
     """The measured channels of ``joints`` on samples [start, n) of a record, normalised."""
 
     def __init__(self, rec: Record, joints: list[str], n: int | None = None, start: int = 0,
-                 pressures: bool = True):
+                 pressures: bool = True, restart: int = 0):
         self.rec = rec
+        self.restart = int(restart)
         self.n = rec.n if n is None else n
         self.start = start
         self.joints = list(joints)
@@ -54,6 +55,9 @@ class Problem:
             s = float(np.linalg.norm(y - y.mean()))
             self.scale[k] = s if s > 0 else 1.0
         self.size = sum(y.size for y in self.meas.values())
+        if self.restart:
+            self._anchor_index = start + (np.arange(self.n - start) // self.restart) * self.restart
+            self._anchor = {j: smoothed(rec.angles[j][: self.n], rec.dt)[self._anchor_index] for j in self.joints}
 
     def simulated(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
         sl = slice(self.start, self.n)
@@ -121,16 +125,20 @@ class Problem:
                 pressures[j] = (pa[: self.n] + rng.normal(0.0, sp, self.n), pb[: self.n] + rng.normal(0.0, sp, self.n))
         rec = Record("noise", self.rec.time[: self.n], self.rec.U[: self.n], angles, pressures, self.rec.joint_names,
                      self.rec.excited, self.rec.initial_pose)
-        return Problem(rec, self.joints, n=self.n, start=self.start, pressures=self.use_pressures)
+        return Problem(rec, self.joints, n=self.n, start=self.start, pressures=self.use_pressures, restart=self.restart)
 
     def channel_residuals(self, out: Outputs) -> dict[tuple[str, str], np.ndarray]:
         sim = self.simulated(out)
         return {k: self.meas[k] - sim[k] for k in self.meas}
 
     def fits(self, out: Outputs) -> dict[str, dict[str, float]]:
-        """Per joint: NRMSE fit of angle, velocity and (recorded) pressures, and their score."""
+        """Per joint: NRMSE fit of angle, velocity, (recorded) pressures and, with restarts, the restarted
+        angle, and their score."""
         if not out.ok:
-            return {j: {"angle": -math.inf, "velocity": -math.inf, "score": -math.inf} for j in self.joints}
+            failed = {"angle": -math.inf, "velocity": -math.inf, "score": -math.inf}
+            if self.restart:
+                failed["restarted"] = -math.inf
+            return {j: dict(failed) for j in self.joints}
         return self.fits_of(self.simulated(out))
 
     def fits_of(self, sim: dict[tuple[str, str], np.ndarray]) -> dict[str, dict[str, float]]:
@@ -139,6 +147,8 @@ class Problem:
         for j in self.joints:
             f = {"angle": nrmse_fit(self.meas[(j, "angle")], sim[(j, "angle")]),
                  "velocity": nrmse_fit(self.meas[(j, "velocity")], sim[(j, "velocity")])}
+            if self.restart:
+                f["restarted"] = nrmse_fit(self.meas[(j, "angle")], self.restarted(j, sim[(j, "angle")]))
             if (j, "p_a") in self.meas:
                 f["pressure"] = 0.5 * (nrmse_fit(self.meas[(j, "p_a")], sim[(j, "p_a")])
                                        + nrmse_fit(self.meas[(j, "p_b")], sim[(j, "p_b")]))
@@ -147,9 +157,20 @@ class Problem:
         return res
 
 
+    def restarting(self, samples: int) -> "Problem":
+        """This problem with a 'restarted' channel beside the angle: the angle fit over windows of
+        ``samples``, each restarted from the record (closed-loop records: closed_loop.py)."""
+        return Problem(self.rec, self.joints, n=self.n, start=self.start, pressures=self.use_pressures, restart=samples)
+
+    def restarted(self, joint: str, angle: np.ndarray) -> np.ndarray:
+        """The simulated angle moved, window by window, to start where the record's (smoothed) angle
+        starts: what the model predicts over ``restart`` samples from the record's position."""
+        return angle - angle[self._anchor_index - self.start] + self._anchor[joint]
+
+
 def score(f: dict[str, float]) -> float:
     """The decision score of one joint: the mean of its channel fits."""
-    vals = [f[k] for k in ("angle", "velocity", "pressure") if k in f]
+    vals = [f[k] for k in ("angle", "restarted", "velocity", "pressure") if k in f]
     return float(np.mean(vals))
 
 

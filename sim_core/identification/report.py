@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..effects import EFFECTS
+from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
 from .record import start_position
@@ -254,7 +255,10 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
     parts.append(f"<p>Validation: {e(d.validation.source)} from {d.validation.time[d.split]:.2f} s "
                  f"({d.validation.n - d.split} samples). Gain = rise of the joint's score, the mean NRMSE fit of angle, "
                  f"velocity and recorded pressures; accepted from max({data['decision']['threshold_points']:g} points, "
-                 f"{data['decision']['noise_factor']:g} x noise spread) with BIC improving and identified parameters.</p>")
+                 f"{data['decision']['noise_factor']:g} x noise spread) with BIC improving and identified parameters."
+                 + (f" The record is closed loop: the score also takes the angle fit restarted from the recorded position "
+                    f"every {d.restart_s:.2f} s ({RESTART_TAUS:g} time constants of the loop, which corrects a drift within "
+                    f"them, where the model replayed open loop carries it to the end)." if d.restart_s else "") + "</p>")
     # cause and gain
     for s in d.selected:
         eff = EFFECTS[s["effect"]]

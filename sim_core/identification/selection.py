@@ -143,7 +143,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     ev = Evaluation(cand, res.values, res.sigma, res.ci95, res.cost, fits, sims=res.sims, round=round_, outputs=out)
     ev.gain = gain
     ev.base_score = float(np.mean([base_fits[j]["score"] for j in joints]))
-    for ch in ("angle", "velocity", "pressure"):
+    for ch in ("angle", "restarted", "velocity", "pressure"):
         vals = [fits[j][ch] - base_fits[j][ch] for j in joints if ch in fits[j]]
         if vals:
             ev.gain_channels[ch] = float(np.mean(vals))
@@ -203,6 +203,8 @@ def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, floa
             y = val.meas[(j, ch)]
             den = float(np.linalg.norm(y - y.mean())) or 1.0
             chans[ch] = 100.0 * (1.0 - sig * math.sqrt(y.size) / den)
+        if val.restart:
+            chans["restarted"] = chans["angle"]
         if (j, "p_a") in val.meas:
             pc = []
             for ch in ("p_a", "p_b"):
