@@ -2,8 +2,9 @@
 
 Each candidate is fitted by output error on the estimation data together with the calibrated
 nominal parameters (and any effects already accepted), then simulated on the validation data. Its
-gain is the rise of the joint's decision score (mean NRMSE fit of angle, velocity and recorded
-pressures) over the current model. A candidate is accepted when
+gain is the rise of the joint's decision score (mean NRMSE fit of angle, velocity, recorded
+pressures and, on a closed-loop record, the angle restarted from the record: closed_loop.py) over the
+current model. A candidate is accepted when
 
 * gain >= max(2 points, 3 x the noise spread of the gain): the spread is the standard deviation of
   the gain over re-drawn sensor noise of the size measured in the record;
