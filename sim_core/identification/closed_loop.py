@@ -56,6 +56,15 @@ HELD_REPLAY = ("the record is closed loop and its command is replayed held from 
                "replay carries that to the end of the record. Check the controller's rate; log the command at it")
 
 
+def unsaturated(u: np.ndarray, command_range: tuple[float, float] | None) -> np.ndarray:
+    """Samples whose command is strictly inside its range (at a limit the loop is cut)."""
+    if command_range is None:
+        return np.ones(u.size, dtype=bool)
+    lo, hi = command_range
+    span = 1e-6 * max(hi - lo, 1.0)
+    return (u > lo + span) & (u < hi - span)
+
+
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
     """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
     the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains."""
@@ -64,12 +73,8 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
     if u.size < 10:
         return none
     du, dy = np.diff(u), np.diff(y)
-    keep = np.ones(du.size, dtype=bool)
-    if command_range is not None:
-        lo, hi = command_range
-        span = 1e-6 * max(hi - lo, 1.0)
-        inside = (u > lo + span) & (u < hi - span)
-        keep &= inside[1:] & inside[:-1]
+    inside = unsaturated(u, command_range)
+    keep = inside[1:] & inside[:-1]
     big = np.abs(du)
     if keep.any():
         keep &= big <= np.quantile(big[keep], JUMP_QUANTILE)
@@ -97,11 +102,7 @@ def time_constant(u: np.ndarray, y: np.ndarray, dt: float, gain: float,
     command (an offset allowed) where the command is inside its range. None where that is not positive."""
     u, y = np.asarray(u, float), np.asarray(y, float)
     v = velocity(y, dt)
-    keep = np.ones(u.size, dtype=bool)
-    if command_range is not None:
-        lo, hi = command_range
-        span = 1e-6 * max(hi - lo, 1.0)
-        keep = (u > lo + span) & (u < hi - span)
+    keep = unsaturated(u, command_range)
     if keep.sum() < 10 or gain <= 0:
         return None
     uc = u[keep] - u[keep].mean()

@@ -156,7 +156,6 @@ class Problem:
             res[j] = f
         return res
 
-
     def restarting(self, samples: int) -> "Problem":
         """This problem with a 'restarted' channel beside the angle: the angle fit over windows of
         ``samples``, each restarted from the record (closed-loop records: closed_loop.py)."""
