@@ -6,6 +6,10 @@ The unmodelled part is a lightly damped 8 Hz mode between the HydroLek elbow and
 mimic a mode (valve and command effects) so the test runs in well under a minute; with the full
 bank the joint compliance fits 8.1 Hz but leaves the record >30 points under its noise ceiling, and
 the verdict is the same (checked by hand; about two minutes).
+
+A Stribeck friction curve (the bank has a Coulomb friction, no Stribeck curve) is reported as
+unexplained with the Coulomb friction as the closest effect: it fits the angle and leaves part of
+the chamber-pressure misfit; a true Coulomb friction on the same input is named.
 """
 
 import json
@@ -35,8 +39,8 @@ def _record(cli, where, seed, mode_hz=None):
     return meas
 
 
-def _diagnose(cli, meas, out):
-    proc = cli("diagnose", "--robot", "hydrolek", meas, "--report", out, "--effects", *EFFECTS, "--quiet")
+def _diagnose(cli, meas, out, effects=EFFECTS):
+    proc = cli("diagnose", "--robot", "hydrolek", meas, "--report", out, "--effects", *effects, "--quiet")
     assert proc.returncode == 0, proc.stderr
     return json.loads((out / "diagnosis.json").read_text())
 
@@ -73,3 +77,34 @@ def test_the_same_record_without_the_mode_has_nothing_to_explain(cli, tmp_path):
     assert d["unexplained"] == {}
     assert d["pairs"] == []             # a white residual: no pair search
     assert d["decision"]["score_ceiling"] - max(d["extended"]["score"].values()) < d["decision"]["far_points"]
+
+
+STRIBECK = "stribeck_friction:joint=j2,static_torque=120,coulomb_torque=50,stribeck_velocity=0.03"
+COULOMB_NM = 50.0
+
+
+def _friction_record(cli, where, effect, seed=SEED):
+    inp, meas = where / "in.csv", where / "measured.csv"
+    cli("excite", "--robot", "hydrolek", "--joint", "j2", "--duration", 30, "--seed", seed, "--out", inp, check=True)
+    cli("simulate", "--robot", "hydrolek", "--input", inp, "--out", meas, "--noise-angle", 4e-4, "--seed", seed,
+        "--effect", effect, check=True)
+    return meas
+
+
+def test_a_coulomb_friction_standing_for_a_stribeck_curve_is_the_closest_effect_not_the_cause(cli, tmp_path):
+    d = _diagnose(cli, _friction_record(cli, tmp_path, STRIBECK), tmp_path / "rep", ["coulomb_friction", "deadband"])
+    assert d["verdict"] == "unexplained_discrepancy", (d["selected"], d["unexplained"])
+    u = d["unexplained"]
+    assert [c["effect"] for c in u["closest"]] == ["coulomb_friction"]
+    assert any("pressure misfit on j2" in b for b in u["because"]), u["because"]
+    # the closest Coulomb torque lies on the curve it stands for: between its sliding and static levels
+    assert 50.0 <= u["closest"][0]["params"]["torque"] <= 120.0
+    assert "Unexplained discrepancy" in (tmp_path / "rep" / "report.html").read_text()
+
+
+def test_a_true_coulomb_friction_on_the_same_input_is_named(cli, tmp_path):
+    d = _diagnose(cli, _friction_record(cli, tmp_path, f"coulomb_friction:joint=j2,torque={COULOMB_NM}"),
+                  tmp_path / "rep", ["coulomb_friction", "deadband"])
+    assert d["verdict"] == "discrepancy", d["unexplained"]
+    (s,) = d["selected"]
+    assert s["effect"] == "coulomb_friction" and s["params"]["torque"] == pytest.approx(COULOMB_NM, rel=0.1)

@@ -27,7 +27,9 @@ The rules, in the order they apply:
   the choice ambiguous, with the measurement that would decide (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
   (extended or not) still misses the record by far (an angle fit below zero, or more than 10 points
-  under the noise ceiling with failing residual tests), ``discrepancy`` when effects are named,
+  under the noise ceiling with failing residual tests), or when the named effects leave a chamber
+  pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
+  misfit on it, ``discrepancy`` when effects are named,
   ``no_significant_discrepancy`` otherwise.
 """
 
@@ -46,6 +48,7 @@ AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: a
 MAX_EFFECTS = 3
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
+EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
 
 NAMED = "discrepancy"
 NONE = "no_significant_discrepancy"
@@ -386,7 +389,8 @@ def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: b
 # ---- verdict ----------------------------------------------------------------------------------------------
 def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, float], residual_fails: bool,
                         base_score: float | None = None, channel_fits: dict[str, dict[str, float]] | None = None,
-                        channel_ceilings: dict[str, dict[str, float]] | None = None) -> list[str]:
+                        channel_ceilings: dict[str, dict[str, float]] | None = None,
+                        base_channel_fits: dict[str, dict[str, float]] | None = None) -> list[str]:
     """Why the final model (the extended one, or the baseline when nothing is named) does not
     explain the record; empty when it does.
 
@@ -399,7 +403,13 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     * one recorded channel (``channel_fits``: angle, velocity, pressure per joint) more than
       FAR_POINTS below its own noise ceiling (``channel_ceilings``) while the residual tests fail:
       a cause that fits the angle and leaves the chamber pressures as wrong as before has not
-      explained the record, even when the mean over channels comes close."""
+      explained the record, even when the mean over channels comes close;
+    * named effects (``base_channel_fits``: the baseline's channel fits, given when effects are
+      named) that leave a chamber pressure more than THRESHOLD_POINTS below its noise ceiling
+      after closing less than EXPLAINED_SHARE of the baseline's distance on it. The residual tests
+      see the velocity residual only; a cause that fits the motion and leaves much of a pressure
+      misfit (a Coulomb friction standing for a Stribeck curve, a leak for a low supply pressure)
+      is the closest effect, not the cause."""
     why = []
     below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
     if below:
@@ -419,6 +429,19 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             why.append("the model's " + ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise "
                                                    f"ceiling {c:.1f}" for j, ch, f, c in far)
                        + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+    if base_channel_fits and channel_fits and channel_ceilings:
+        for j, fits in channel_fits.items():
+            c, f, b = channel_ceilings.get(j, {}).get("pressure"), fits.get("pressure"), base_channel_fits.get(j, {}).get("pressure")
+            if c is None or f is None or b is None:
+                continue
+            left, before = c - f, c - b
+            if left > FAR_POINTS and residual_fails:
+                continue                                   # said above
+            if left > THRESHOLD_POINTS and not left <= (1.0 - EXPLAINED_SHARE) * before:
+                done = f"close {100 * (1.0 - left / before):.0f} %" if before > 0 else "do not close any"
+                why.append(f"the named effects {done} of the baseline's pressure misfit on {j} (from {before:.1f} to "
+                           f"{left:.1f} points below its noise ceiling {c:.1f}); a cause must close "
+                           f"{100 * EXPLAINED_SHARE:.0f} % of a misfit the residual tests do not see")
     return why
 
 
