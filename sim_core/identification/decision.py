@@ -431,12 +431,13 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
                        + f" (more than {FAR_POINTS:g}) and its residual tests fail")
     if base_channel_fits and channel_fits and channel_ceilings:
         for j, fits in channel_fits.items():
-            c, f, b = channel_ceilings.get(j, {}).get("pressure"), fits.get("pressure"), base_channel_fits.get(j, {}).get("pressure")
+            c = channel_ceilings.get(j, {}).get("pressure")
+            f, b = fits.get("pressure"), base_channel_fits.get(j, {}).get("pressure")
             if c is None or f is None or b is None:
                 continue
             left, before = c - f, c - b
             if left > FAR_POINTS and residual_fails:
-                continue                                   # said above
+                continue                    # already unexplained by the rules above
             if left > THRESHOLD_POINTS and not left <= (1.0 - EXPLAINED_SHARE) * before:
                 done = f"close {100 * (1.0 - left / before):.0f} %" if before > 0 else "do not close any"
                 why.append(f"the named effects {done} of the baseline's pressure misfit on {j} (from {before:.1f} to "
