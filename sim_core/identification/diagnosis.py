@@ -413,7 +413,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                               base_score=_score(base_fits, joints),
                               channel_fits={j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints},
                               channel_ceilings=ceilings,
-                              base_channel_fits={j: base_fits[j] for j in joints} if selected else None)
+                              base_channel_fits=base_fits if selected else None)
     if not why:
         return {}
     return {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
