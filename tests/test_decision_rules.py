@@ -369,6 +369,71 @@ def test_backward_removes_a_pair_named_together_as_a_unit():
     assert all(any("removing the pair" in r for r in m.reasons) for m in members + [pair])
 
 
+# ---- exchange pass -------------------------------------------------------------------------------------
+ASYM, OFFSET, SAT, LAG, HYST = (cand("valve_asymmetry"), cand("valve_offset"), cand("flow_saturation"),
+                                cand("spool_lag"), cand("hysteresis"))
+
+
+def exchange_case(offset_gain, offset_spread=0.01, full=98.0, accepted=lambda r1, r2: [r1[0], r2[0]]):
+    """Round 1 named a valve asymmetry over a null offset, round 2 a hysteresis; the offset refitted in
+    the asymmetry's place (the hysteresis in the model) gains ``offset_gain`` on the model without it
+    (score 80)."""
+    r1 = [judged(scored(ASYM, gain=13.5)), judged(scored(OFFSET, gain=6.2)), judged(scored(SAT, gain=3.0)),
+          judged(scored(LAG, gain=-1.0))]
+    r2 = [judged(scored(HYST, gain=6.6)), judged(scored(OFFSET, gain=0.0))]
+    r2[0].round = 2
+    accepted = accepted(r1, r2)
+    calls = []
+
+    def refit_without(model, ev, rest):
+        calls.append(("without", ev.candidate.label, [e.candidate.label for e in rest]))
+        return "model without " + ev.candidate.label, 80.0
+
+    def evaluate(pool, minus, rest, r):
+        calls.append(("fit", [c.label for c in pool], minus, r))
+        gains = {OFFSET.label: (offset_gain, offset_spread), SAT.label: (2.5, 0.01)}
+        return [judged(dc.Evaluation(c, {fp.key: 1.0 for fp in c.free}, {fp.key: 0.1 for fp in c.free}, {}, 1.0, {},
+                                     gain=gains[c.label][0], spread=gains[c.label][1], bic_delta=-10.0,
+                                     base_score=80.0, round=r)) for c in pool]
+
+    out = dc.exchange(accepted, [r1, r2], "model", full, refit_without=refit_without, evaluate=evaluate,
+                      score_with=lambda ev: ev.base_score + ev.gain,
+                      replace=lambda minus, ev: (minus, ev.candidate.label), score=lambda m: 99.0)
+    return out, calls, r1, r2
+
+
+def test_exchange_replaces_an_early_pick_by_a_rival_that_explains_more_beside_a_later_effect():
+    (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=19.0)     # 99.0 against 98.0
+    # the asymmetry's round's two best other candidates with a positive gain, fitted in a round of their
+    # own on the model without it (the hysteresis kept); the last effect named is not tried
+    assert calls == [("without", ASYM.label, [HYST.label]),
+                     ("fit", [OFFSET.label, SAT.label], "model without " + ASYM.label, 3)]
+    assert [e.candidate.label for e in kept] == [OFFSET.label, HYST.label] and kept[1] is r2[0]
+    assert model == ("model without " + ASYM.label, OFFSET.label)
+    assert tried[0][0] is r1[0] and [e.candidate.label for e in tried[0][1]] == [OFFSET.label, SAT.label]
+    assert any("exchanged for" in r for r in r1[0].reasons)
+    assert any("gains more in place of" in r for r in tried[0][1][1].reasons)      # the weaker passing rival
+
+
+def test_exchange_keeps_the_pick_unless_the_rival_wins_by_half_a_point_or_three_noise_spreads():
+    for gain, spread in ((18.4, 0.01), (18.0, 0.01), (19.0, 0.4)):   # +0.4, +0.0, +1.0 against a margin of 1.2
+        (model, kept, tried), _, r1, r2 = exchange_case(offset_gain=gain, offset_spread=spread)
+        assert kept == [r1[0], r2[0]] and model == "model", (gain, spread)
+        assert r1[0].accepted_ok and any("not more than" in r for r in tried[0][1][0].reasons)
+    (model, kept, _), _, r1, _ = exchange_case(offset_gain=1.5)       # a rival must pass on its own
+    assert kept[0] is r1[0] and model == "model"
+
+
+def test_exchange_leaves_pairs_named_together_and_effects_without_rivals():
+    members = dc.member_evaluations(judged(scored_pair(A, C)))
+    (model, kept, tried), calls, _, r2 = exchange_case(offset_gain=19.0, accepted=lambda r1, r2: members + [r2[0]])
+    assert tried == [] and calls == [] and model == "model" and kept[:2] == members
+    # the round's other candidates are named already or lose (the spool lag): nothing to fit
+    (model, kept, tried), calls, r1, r2 = exchange_case(
+        offset_gain=19.0, accepted=lambda r1, r2: [r1[0], r1[1], r1[2], r2[0]])
+    assert tried == [] and calls == [] and kept == [r1[0], r1[1], r1[2], r2[0]]
+
+
 def test_final_check_drops_both_members_of_a_pair_together():
     members = dc.member_evaluations(judged(scored_pair(A, C)))
     single = scored(B)

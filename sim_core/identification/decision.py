@@ -19,6 +19,10 @@ The rules, in the order they apply:
 * backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
   less than 2 points is dropped (an early pick can stand in for effects named later); a pair named
   together is removed together (each alone is absorbed by the refit, by definition);
+* exchange pass (:func:`exchange`): each effect named before the last is refitted against the
+  strongest rivals of its round once the later effects are in the model; a rival that passes there
+  and beats it by 0.5 points (or 3 x the rival's noise spread) takes its place (a greedy first pick
+  can be the best single stand-in for a cause that only shows beside an effect named later);
 * final check (:func:`final_check`): in the refitted final model each named effect must still be
   worth 2 points, else the weakest is dropped and the rest refitted; when the search had stopped
   near the noise ceiling because of a dropped effect, the pair search it skipped runs then
@@ -49,6 +53,8 @@ MAX_EFFECTS = 3
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
 EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
+EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
+EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
 
 NAMED = "discrepancy"
 NONE = "no_significant_discrepancy"
@@ -306,6 +312,67 @@ def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Fo
     log(f"the final check dropped {', '.join(e.candidate.label for e in dropped)}: fitting {len(pairs)} pairs")
     pevals = evaluate_pairs(pairs, model, [(e.candidate, e.effect_params()) for e in kept], r)
     return pevals, best_passing(pevals)
+
+
+# ---- exchange pass ---------------------------------------------------------------------------------------
+def exchange_rivals(ev: Evaluation, round_evals: list[Evaluation], accepted: list[Evaluation],
+                    k: int = EXCHANGE_RIVALS) -> list[Evaluation]:
+    """The ``k`` candidates of ``ev``'s round with the largest positive gains, other than the effects
+    already named."""
+    taken = {e.key for e in accepted}
+    rivals = [e for e in round_evals if e.key not in taken and math.isfinite(e.gain) and e.gain > 0]
+    return sorted(rivals, key=lambda e: -e.gain)[:k]
+
+
+def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, full: float, *,
+             refit_without: Callable, evaluate: Callable, score_with: Callable, replace: Callable, score: Callable,
+             log=None):
+    """Refit each effect named before the last against its round's strongest rivals, with the effects
+    named after it in the model: greedy selection takes a round's best single with what the model held
+    then, and an effect named later can make a rival the better explanation (a valve asymmetry stands
+    for a null offset until the hysteresis beside it is named). The last effect's round already saw
+    every other; a pair named together goes as found.
+
+    ``refit_without(model, ev, rest)`` -> (the model without ``ev``, the rest refitted; its score);
+    ``evaluate(candidates, model, rest, round)`` -> their judged Evaluations fitted on that model;
+    ``score_with(ev)`` -> the validation score of the model with ``ev``'s fit (every joint, like
+    ``full``); ``replace(model, ev)`` -> that model. A rival takes the place when it passes the
+    acceptance rules on the model without the effect and its model scores more than
+    max(EXCHANGE_POINTS, 3 x its noise spread) above ``full``; ``score(model)`` is then the new
+    ``full``. Returns (model, accepted, [(effect tried, its rivals' Evaluations)])."""
+    log = log or (lambda msg: None)
+    accepted = list(accepted)
+    tried: list[tuple[Evaluation, list[Evaluation]]] = []
+    for ev in list(accepted[:-1]):
+        if ev.pair is not None:
+            continue
+        rivals = exchange_rivals(ev, rounds[ev.round - 1], accepted)
+        if not rivals:
+            continue
+        rest = [e for e in accepted if e is not ev]
+        minus, s_minus = refit_without(model, ev, rest)
+        r = len(rounds) + len(tried) + 1
+        evals = evaluate([e.candidate for e in rivals], minus, rest, r)
+        tried.append((ev, evals))
+        best = best_passing(evals)
+        if best is None:
+            continue
+        for e in evals:
+            if e.accepted_ok and e is not best:
+                e.reasons.append(f"{best.candidate.label} gains more in place of {ev.candidate.label}")
+        s = score_with(best)
+        margin = max(EXCHANGE_POINTS, NOISE_FACTOR * best.spread)
+        if not s - full > margin:
+            best.reasons.append(f"in place of {ev.candidate.label} its model scores {s - full:+.2f} points, "
+                                f"not more than {margin:.2f}")
+            continue
+        log(f"exchange: {best.candidate.label} replaces {ev.candidate.label} ({full:.2f} -> {s:.2f} points)")
+        ev.reasons.append(f"exchanged for {best.candidate.label}: with the effects named after it in the model, "
+                          f"{best.candidate.label} in its place scores {s - full:+.2f} points more")
+        accepted = [best if e is ev else e for e in accepted]
+        model = replace(minus, best)
+        full = score(model)
+    return model, accepted, tried
 
 
 # ---- backward pass and final check ----------------------------------------------------------------------

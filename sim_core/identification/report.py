@@ -317,7 +317,7 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
     for c in data["candidates"]:
         params = ", ".join(f"{k}={_fmt(v)}" for k, v in c["params"].items())
         why = "accepted" if c["accepted"] else "; ".join(c["rejected_because"])
-        parts.append(f"<tr><td>{c['round']}</td><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td>"
+        parts.append(f"<tr><td>{e(_round(c))}</td><td>{e(c['effect'])}</td><td>{e(str(c['joint'] or '-'))}</td>"
                      f"<td>{c['gain']:+.2f}{_share(c)}</td><td>{_fmt(c['bic_delta'])}</td><td>{e(params)}</td>"
                      f"<td class='{'ok' if c['accepted'] else ''}'>{e(why)}</td></tr>")
     parts.append("</table>")
@@ -339,6 +339,12 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                  f"(checked on this record: {e(json.dumps(d.numerics.get('candidates', {})))})</li></ul>")
     parts.append("</body></html>")
     return "".join(parts)
+
+
+def _round(c: dict) -> str:
+    """A candidate's round; for the exchange pass's fits, the effect it was fitted in place of."""
+    x = c.get("in_place_of")
+    return f"{c['round']} (in place of {x['effect']}@{x['joint'] or '-'})" if x else str(c["round"])
 
 
 def _share(item: dict) -> str:
@@ -512,7 +518,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
     lines.append("|---|---|---|---|---|---|")
     for c in data["candidates"]:
         why = "accepted" if c["accepted"] else "; ".join(c["rejected_because"])
-        lines.append(f"| {c['round']} | {c['effect']} | {c['joint'] or '-'} | {c['gain']:+.2f} | {_fmt(c['bic_delta'])} | {why} |")
+        lines.append(f"| {_round(c)} | {c['effect']} | {c['joint'] or '-'} | {c['gain']:+.2f} | {_fmt(c['bic_delta'])} | {why} |")
     return "\n".join(lines) + "\n"
 
 

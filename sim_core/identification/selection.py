@@ -37,7 +37,7 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, forward, judge, member_evaluations, pairs_after_a_drop)
+                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .side_by_side import SideBySide
@@ -324,6 +324,8 @@ class Selection:
     # (kept, dropped) after the final check -> (accepted, fast model) with a pair that passes, or None
     resume: Callable | None = None
     channel_ceilings: dict[str, dict[str, float]] = field(default_factory=dict)   # joint -> channel -> ceiling
+    # the exchange pass's rounds: id(rival's Evaluation) -> the accepted effect it was fitted in place of
+    in_place_of: dict[int, Evaluation] = field(default_factory=dict)
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
@@ -367,18 +369,40 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     finally:
         side.close()
     model, accepted = fw.model, fw.accepted
+    rounds, stopped, exchanged = list(fw.rounds), fw.stopped, {}
     if len(accepted) >= 2:
+        refits: dict[tuple[int, int], tuple] = {}
+
         def refit_without(model, ev, rest):
+            # the backward pass and the exchange pass ask for the same refits: each is fitted once
+            hit = refits.get((id(model), id(ev)))
+            if hit is not None and hit[0] is model and hit[1] is ev:
+                return hit[2]
             minus = without(base_spec, model, ev.candidate)
             free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
             res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
+            refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return res.spec, base.score(res.spec)
 
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log)
+        if len(accepted) >= 2:
+            before = list(accepted)
+            model, accepted, tried = exchange(
+                accepted, rounds, model, base.score(model), refit_without=refit_without,
+                evaluate=lambda pool, minus, rest, r: evaluate_round(
+                    pool, minus, [(e.candidate, e.effect_params()) for e in rest], r),
+                score_with=lambda ev: float(np.mean([f["score"] for f in ev.fits.values()])),
+                replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log)
+            rounds += [evals for _, evals in tried]
+            exchanged = {id(e): ev for ev, evals in tried for e in evals}
+            swaps = [(old, new) for old, new in zip(before, accepted) if old is not new]
+            if swaps:
+                stopped += "; " + ", ".join(f"{new.candidate.label} named in place of {old.candidate.label}" for old, new in swaps)
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    sel = Selection(accepted, fw.rounds, model, values, fw.stopped, ceiling, fw.pairs, channel_ceilings=ceilings)
+    sel = Selection(accepted, rounds, model, values, stopped, ceiling, fw.pairs, channel_ceilings=ceilings,
+                    in_place_of=exchanged)
 
     def resume(kept, dropped):
         """decision.pairs_after_a_drop on the search's model without the dropped effects."""
