@@ -316,6 +316,15 @@ def test_the_pair_search_skipped_at_the_ceiling_runs_once_the_final_check_drops_
     # an effect the final check kept is not offered again in a pair
     pevals, _ = after(fw.accepted, kept=[fw.rounds[0][1]])
     assert all(B.label not in p for p in asked[0][3]) and asked[0][1] == [B.label]
+    # an effect the exchange pass put in (fitted in a later round of its own) searches the pairs of the
+    # round it took the place in
+    swapped = scored(A)
+    swapped.round = 7
+    asked.clear()
+    fw.at_ceiling = True
+    dc.pairs_after_a_drop([], [swapped], fw, E, evaluate_pairs=evaluate_pairs, score=lambda m: 96.0, ceiling=100.0,
+                          misfit=lambda m: True, round_of=lambda ev: 1 if ev is swapped else ev.round)
+    assert len(asked) == 1 and asked[0][2] == 1
 
 
 # ---- backward pass and final check ----------------------------------------------------------------

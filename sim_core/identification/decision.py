@@ -292,19 +292,22 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
                        evaluate_pairs: Callable | None, score: Callable, ceiling: float, misfit: Callable | None = None,
-                       max_effects: int = MAX_EFFECTS, log=None) -> tuple[list[Evaluation], Evaluation | None]:
+                       max_effects: int = MAX_EFFECTS, log=None,
+                       round_of: Callable | None = None) -> tuple[list[Evaluation], Evaluation | None]:
     """The pair search that forward selection skipped because an effect brought the model within the
     threshold of its noise ceiling, run once the final check has dropped that effect (the reason to
     stop is gone with it). ``model``: the search's model without the dropped effects, ``kept``: what the
     final check kept. The pairs come from the round the first dropped effect joined in, the dropped
     one among them (not worth the threshold alone, it may be with a partner), under the same
     conditions as in :func:`forward` (the model not near its ceiling, its residual tests failing,
-    room for two more). Returns the pair evaluations and the passing pair's evaluation (or None)."""
+    room for two more). ``round_of(ev)``: the forward round an effect joined in (default ``ev.round``;
+    an effect the exchange pass put in takes the round of the one it replaced). Returns the pair
+    evaluations and the passing pair's evaluation (or None)."""
     log = log or (lambda msg: None)
     if (not dropped or not fw.at_ceiling or evaluate_pairs is None or len(kept) + 2 > max_effects
             or near_ceiling(score(model), ceiling) or (misfit is not None and not misfit(model))):
         return [], None
-    r = min(ev.round for ev in dropped)
+    r = min((round_of or (lambda ev: ev.round))(ev) for ev in dropped)
     taken = {e.key for e in kept}
     pairs = [p for p in rank_pairs(fw.rounds[r - 1]) if p[0].key not in taken and p[1].key not in taken]
     if not pairs:

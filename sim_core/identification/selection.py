@@ -412,7 +412,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         pevals, best = pairs_after_a_drop(
             kept, dropped, fw, reduced, evaluate_pairs=None if misfit is None else evaluate_pairs, score=base.score,
             ceiling=ceiling, misfit=None if misfit is None else (lambda m: misfit(base.outputs(m))),
-            max_effects=max_effects, log=log)
+            max_effects=max_effects, log=log,
+            round_of=lambda ev: exchanged[id(ev)].round if id(ev) in exchanged else ev.round)
         if not pevals:
             return None
         sel.pairs.append(pevals)
