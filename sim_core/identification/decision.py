@@ -353,7 +353,7 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
         if not rivals:
             continue
         rest = [e for e in accepted if e is not ev]
-        minus, s_minus = refit_without(model, ev, rest)
+        minus, _ = refit_without(model, ev, rest)
         r = len(rounds) + len(tried) + 1
         evals = evaluate([e.candidate for e in rivals], minus, rest, r)
         tried.append((ev, evals))

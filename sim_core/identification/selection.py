@@ -18,7 +18,8 @@ parameters are refitted as the candidates will refit them; the next round refits
 remaining candidate jointly with everything accepted (a large effect masks the others, so first-round
 gains are no guide), and stops when nothing passes or when the score is within the threshold of its
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
-threshold. The rules themselves are pure functions in decision.py; this module supplies the
+threshold, and an exchange pass refits each earlier pick against its round's strongest rivals with
+the later effects in the model. The rules themselves are pure functions in decision.py; this module supplies the
 simulator-based steps they call (fit and score a candidate, score a model, refit without an effect).
 """
 
@@ -330,8 +331,8 @@ class Selection:
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
            max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None) -> Selection:
-    """Greedy forward selection, the masked-pair search and the backward pass (decision.forward,
-    decision.backward) with the simulator-based steps: a round of candidate fits, pair fits, the
+    """Greedy forward selection, the masked-pair search, the backward and the exchange pass
+    (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round of candidate fits, pair fits, the
     validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
     effect is in it, its calibration redone (it may change ``st.calib_keys`` in place); None: the
     model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
@@ -382,7 +383,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
             res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
-            return res.spec, base.score(res.spec)
+            return refits[(id(model), id(ev))][2]
 
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log)
         if len(accepted) >= 2:
