@@ -319,11 +319,11 @@ def test_the_pair_search_skipped_at_the_ceiling_runs_once_the_final_check_drops_
     # an effect the exchange pass put in (fitted in a later round of its own) searches the pairs of the
     # round it took the place in
     swapped = scored(A)
-    swapped.round = 7
+    swapped.round, swapped.in_place_of = 7, fw.rounds[0][1]
     asked.clear()
     fw.at_ceiling = True
     dc.pairs_after_a_drop([], [swapped], fw, E, evaluate_pairs=evaluate_pairs, score=lambda m: 96.0, ceiling=100.0,
-                          misfit=lambda m: True, round_of=lambda ev: 1 if ev is swapped else ev.round)
+                          misfit=lambda m: True)
     assert len(asked) == 1 and asked[0][2] == 1
 
 
@@ -419,16 +419,17 @@ def test_exchange_replaces_an_early_pick_by_a_rival_that_explains_more_beside_a_
                      ("fit", [OFFSET.label, SAT.label], "model without " + ASYM.label, 3)]
     assert [e.candidate.label for e in kept] == [OFFSET.label, HYST.label] and kept[1] is r2[0]
     assert model == ("model without " + ASYM.label, OFFSET.label)
-    assert tried[0][0] is r1[0] and [e.candidate.label for e in tried[0][1]] == [OFFSET.label, SAT.label]
+    assert [e.candidate.label for e in tried[0]] == [OFFSET.label, SAT.label]
+    assert all(e.in_place_of is r1[0] for e in tried[0])
     assert any("exchanged for" in r for r in r1[0].reasons)
-    assert any("gains more in place of" in r for r in tried[0][1][1].reasons)      # the weaker passing rival
+    assert any("gains more in place of" in r for r in tried[0][1].reasons)      # the weaker passing rival
 
 
 def test_exchange_keeps_the_pick_unless_the_rival_wins_by_half_a_point_or_three_noise_spreads():
     for gain, spread in ((18.4, 0.01), (18.0, 0.01), (19.0, 0.4)):   # +0.4, +0.0, +1.0 against a margin of 1.2
         (model, kept, tried), _, r1, r2 = exchange_case(offset_gain=gain, offset_spread=spread)
         assert kept == [r1[0], r2[0]] and model == "model", (gain, spread)
-        assert r1[0].accepted_ok and any("not more than" in r for r in tried[0][1][0].reasons)
+        assert r1[0].accepted_ok and any("not more than" in r for r in tried[0][0].reasons)
     (model, kept, _), _, r1, _ = exchange_case(offset_gain=1.5)       # a rival must pass on its own
     assert kept[0] is r1[0] and model == "model"
 

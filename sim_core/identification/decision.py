@@ -83,6 +83,7 @@ class Evaluation:
     outputs: Any = None
     base_score: float = math.nan              # the model it is compared with, on the same joints
     pair: Evaluation | None = None            # a member of a pair named together: the pair's evaluation
+    in_place_of: Evaluation | None = None     # a rival of the exchange pass: the accepted effect it was fitted for
 
     @property
     def accepted_ok(self) -> bool:
@@ -292,22 +293,20 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
                        evaluate_pairs: Callable | None, score: Callable, ceiling: float, misfit: Callable | None = None,
-                       max_effects: int = MAX_EFFECTS, log=None,
-                       round_of: Callable | None = None) -> tuple[list[Evaluation], Evaluation | None]:
+                       max_effects: int = MAX_EFFECTS, log=None) -> tuple[list[Evaluation], Evaluation | None]:
     """The pair search that forward selection skipped because an effect brought the model within the
     threshold of its noise ceiling, run once the final check has dropped that effect (the reason to
     stop is gone with it). ``model``: the search's model without the dropped effects, ``kept``: what the
     final check kept. The pairs come from the round the first dropped effect joined in, the dropped
     one among them (not worth the threshold alone, it may be with a partner), under the same
     conditions as in :func:`forward` (the model not near its ceiling, its residual tests failing,
-    room for two more). ``round_of(ev)``: the forward round an effect joined in (default ``ev.round``;
-    an effect the exchange pass put in takes the round of the one it replaced). Returns the pair
-    evaluations and the passing pair's evaluation (or None)."""
+    room for two more). An effect the exchange pass put in counts from the round of the one it
+    replaced. Returns the pair evaluations and the passing pair's evaluation (or None)."""
     log = log or (lambda msg: None)
     if (not dropped or not fw.at_ceiling or evaluate_pairs is None or len(kept) + 2 > max_effects
             or near_ceiling(score(model), ceiling) or (misfit is not None and not misfit(model))):
         return [], None
-    r = min((round_of or (lambda ev: ev.round))(ev) for ev in dropped)
+    r = min((ev.in_place_of or ev).round for ev in dropped)
     taken = {e.key for e in kept}
     pairs = [p for p in rank_pairs(fw.rounds[r - 1]) if p[0].key not in taken and p[1].key not in taken]
     if not pairs:
@@ -342,10 +341,11 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
     ``full``); ``replace(model, ev)`` -> that model. A rival takes the place when it passes the
     acceptance rules on the model without the effect and its model scores more than
     max(EXCHANGE_POINTS, 3 x its noise spread) above ``full``; ``score(model)`` is then the new
-    ``full``. Returns (model, accepted, [(effect tried, its rivals' Evaluations)])."""
+    ``full``. Each rival's ``in_place_of`` is the effect it was fitted for. Returns (model, accepted,
+    the rivals' Evaluations of each effect tried)."""
     log = log or (lambda msg: None)
     accepted = list(accepted)
-    tried: list[tuple[Evaluation, list[Evaluation]]] = []
+    tried: list[list[Evaluation]] = []
     for ev in list(accepted[:-1]):
         if ev.pair is not None:
             continue
@@ -356,7 +356,9 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
         minus, _ = refit_without(model, ev, rest)
         r = len(rounds) + len(tried) + 1
         evals = evaluate([e.candidate for e in rivals], minus, rest, r)
-        tried.append((ev, evals))
+        for e in evals:
+            e.in_place_of = ev
+        tried.append(evals)
         best = best_passing(evals)
         if best is None:
             continue

@@ -352,9 +352,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "gain_channels": {k: round(v, 3) for k, v in ev.gain_channels.items()},
                 "noise_spread": round(ev.spread, 4), "simulations": ev.sims,
             })
-            instead = sel.in_place_of.get(id(ev))
-            if instead is not None:     # a rival refitted in place of an effect by the exchange pass
-                candidates[-1]["in_place_of"] = {"effect": instead.candidate.effect, "joint": instead.candidate.joint}
+            if ev.in_place_of is not None:     # a rival refitted in place of an effect by the exchange pass
+                candidates[-1]["in_place_of"] = {"effect": ev.in_place_of.candidate.effect,
+                                                 "joint": ev.in_place_of.candidate.joint}
 
     pairs = []
     for evals in sel.pairs:

@@ -19,8 +19,9 @@ remaining candidate jointly with everything accepted (a large effect masks the o
 gains are no guide), and stops when nothing passes or when the score is within the threshold of its
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
 threshold, and an exchange pass refits each earlier pick against its round's strongest rivals with
-the later effects in the model. The rules themselves are pure functions in decision.py; this module supplies the
-simulator-based steps they call (fit and score a candidate, score a model, refit without an effect).
+the later effects in the model. The rules themselves are pure functions in decision.py; this module
+supplies the simulator-based steps they call (fit and score a candidate, score a model, refit
+without an effect).
 """
 
 from __future__ import annotations
@@ -325,15 +326,13 @@ class Selection:
     # (kept, dropped) after the final check -> (accepted, fast model) with a pair that passes, or None
     resume: Callable | None = None
     channel_ceilings: dict[str, dict[str, float]] = field(default_factory=dict)   # joint -> channel -> ceiling
-    # the exchange pass's rounds: id(rival's Evaluation) -> the accepted effect it was fitted in place of
-    in_place_of: dict[int, Evaluation] = field(default_factory=dict)
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
            max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None) -> Selection:
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
-    (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round of candidate fits, pair fits, the
-    validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
+    (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
+    of candidate fits, pair fits, the validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
     effect is in it, its calibration redone (it may change ``st.calib_keys`` in place); None: the
     model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
     condition for the pair search); None: no pair search."""
@@ -370,7 +369,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     finally:
         side.close()
     model, accepted = fw.model, fw.accepted
-    rounds, stopped, exchanged = list(fw.rounds), fw.stopped, {}
+    rounds, stopped = list(fw.rounds), fw.stopped
     if len(accepted) >= 2:
         refits: dict[tuple[int, int], tuple] = {}
 
@@ -392,18 +391,16 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                 accepted, rounds, model, base.score(model), refit_without=refit_without,
                 evaluate=lambda pool, minus, rest, r: evaluate_round(
                     pool, minus, [(e.candidate, e.effect_params()) for e in rest], r),
-                score_with=lambda ev: float(np.mean([f["score"] for f in ev.fits.values()])),
+                score_with=lambda ev: mean_score(ev.fits),
                 replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log)
-            rounds += [evals for _, evals in tried]
-            exchanged = {id(e): ev for ev, evals in tried for e in evals}
+            rounds += tried
             swaps = [(old, new) for old, new in zip(before, accepted) if old is not new]
             if swaps:
                 stopped += "; " + ", ".join(f"{new.candidate.label} named in place of {old.candidate.label}" for old, new in swaps)
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    sel = Selection(accepted, rounds, model, values, stopped, ceiling, fw.pairs, channel_ceilings=ceilings,
-                    in_place_of=exchanged)
+    sel = Selection(accepted, rounds, model, values, stopped, ceiling, fw.pairs, channel_ceilings=ceilings)
 
     def resume(kept, dropped):
         """decision.pairs_after_a_drop on the search's model without the dropped effects."""
@@ -413,8 +410,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         pevals, best = pairs_after_a_drop(
             kept, dropped, fw, reduced, evaluate_pairs=None if misfit is None else evaluate_pairs, score=base.score,
             ceiling=ceiling, misfit=None if misfit is None else (lambda m: misfit(base.outputs(m))),
-            max_effects=max_effects, log=log,
-            round_of=lambda ev: exchanged[id(ev)].round if id(ev) in exchanged else ev.round)
+            max_effects=max_effects, log=log)
         if not pevals:
             return None
         sel.pairs.append(pevals)
@@ -453,6 +449,11 @@ def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: 
     return (res.spec, (before, after)) if after > before else (model, None)
 
 
+def mean_score(fits: dict[str, dict[str, float]]) -> float:
+    """A model's validation score: the mean over joints of their decision scores."""
+    return float(np.mean([f["score"] for f in fits.values()]))
+
+
 class _Baseline:
     """The current model's validation outputs, score and estimation cost (simulated once per model)."""
 
@@ -468,7 +469,7 @@ class _Baseline:
         return hit[1]
 
     def score(self, model) -> float:
-        return float(np.mean([v["score"] for v in self.st.val.fits(self.outputs(model)).values()]))
+        return mean_score(self.st.val.fits(self.outputs(model)))
 
     def cost(self, model) -> float:
         st = self.st
