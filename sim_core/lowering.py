@@ -1,8 +1,9 @@
 """Lowering: a validated :class:`RobotSpec` -> the dense arrays the compiled kernel reads.
 
 Each component and effect writes its own columns (``lower``); this module only walks the spec in
-the right order: actuator components, the effects' neutral values, the effects that change the
-mechanism (payload), the joints (end stops need the final inertia), the globals, the other effects.
+the right order: actuator components, the effects' neutral values, the links' mass scale and the
+effects that change the mechanism (payload), the joints (end stops need the final inertia), the
+globals, the other effects.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ def lower(spec: RobotSpec) -> Lowered:
     GP = np.zeros(L.GP_N)
     q0 = initial_positions(spec)
     lw = Lowered(AP, DP, GP, tree.mass.copy(), tree.com.copy(), tree.inertia.copy(), np.zeros(n), q0, spec)
+    spec.links.lower_masses(lw)
 
     # --- actuators: every component of the joint's chain writes its columns
     for a, js in enumerate(spec.joints):

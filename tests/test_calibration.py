@@ -54,6 +54,9 @@ def test_built_in_robot_frees_only_what_no_effect_of_the_bank_can_stand_for(off_
     assert "coulomb_friction" in full.held["joints.j2.cylinder.viscous_friction"]
     assert "bulk_modulus" in full.held["fluid.bulk_modulus"]
     assert "payload" in full.held["effects.payload.j2.mass"]
+    # the links' masses as a whole are held too, as the payload's stand-in (selection's stand-in pass)
+    assert "payload" in full.held["links.mass_scale"]
+    assert [fp.key for fp in full.stand_ins["payload"]] == ["links.mass_scale"] and set(full.stand_ins) == {"payload"}
     # with a bank that no longer competes, the record's pressures and gravity load free the rest
     narrow = plan(model_spec(spec), rec, effects=["delay"])
     assert set(narrow.keys) == {"joints.j2.valve.rated_flow", "supply.pressure", "fluid.bulk_modulus",

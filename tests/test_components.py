@@ -135,3 +135,22 @@ def test_spec_errors_name_the_parameter():
         spec.enable_effect("area_ratio", "j6", ratio=0.5)
     with pytest.raises(SpecError, match="no sensor"):
         spec.enable_effect("sensor_offset", "j6", offset=0.1)
+
+
+def test_the_links_mass_scale_scales_every_mass_inertia_and_gravity_torque():
+    from sim_core.lowering import initial_positions, lower
+    from sim_core.dynamics.rigid_body import RigidBodyModel
+
+    spec = load_robot("hydrolek")
+    a = lower(spec)
+    spec.set("links.mass_scale", 1.2)
+    b = lower(spec)
+    assert np.allclose(b.mass, 1.2 * a.mass) and np.allclose(b.inertia, 1.2 * a.inertia)
+    assert np.array_equal(b.com, a.com)
+    q, z = initial_positions(spec) + 0.3, np.zeros(spec.tree.n)
+    ga = RigidBodyModel(spec.tree, a.mass, a.com, a.inertia).inverse_dynamics(q, z, z)
+    gb = RigidBodyModel(spec.tree, b.mass, b.com, b.inertia).inverse_dynamics(q, z, z)
+    assert np.allclose(gb, 1.2 * ga) and np.abs(ga).max() > 1.0
+    with pytest.raises(SpecError, match="links.mass_scale"):
+        spec.set("links.mass_scale", 9.0)
+

@@ -444,6 +444,44 @@ def test_exchange_leaves_pairs_named_together_and_effects_without_rivals():
     assert tried == [] and calls == [] and kept == [r1[0], r1[1], r1[2], r2[0]]
 
 
+# ---- stand-ins ----------------------------------------------------------------------------------------
+PAYLOAD = cand("payload", "j2", (("mass", -5.0, 40.0, 0.0),))
+
+
+def stand_in_case(alt_score, bound=None, accepted=None):
+    """A payload named beside a deadband in a model scoring 98.0; the links' mass scale refitted in the
+    payload's place scores ``alt_score``."""
+    evs = accepted or [scored(A), scored(PAYLOAD)]
+    calls = []
+
+    def refit_instead(model, ev, rest, p):
+        calls.append((model, ev.candidate.label, [e.candidate.label for e in rest], p))
+        return "model with " + p, alt_score, 1.15, bound
+
+    out = dc.stand_in(evs, "model", 98.0, stand_ins=lambda ev: ["links.mass_scale"] if ev.candidate.effect == "payload" else [],
+                      refit_instead=refit_instead)
+    return out, calls, evs
+
+
+def test_a_named_effect_its_stand_in_explains_as_well_becomes_a_calibration_finding():
+    (model, kept, found), calls, evs = stand_in_case(alt_score=96.5)       # 1.5 points below: within 2
+    assert calls == [("model", PAYLOAD.label, [A.label], "links.mass_scale")]   # only the payload has one
+    assert kept == [evs[0]] and model == "model with links.mass_scale"
+    assert found == [(evs[1], "links.mass_scale", 1.15, 96.5, 98.0)]
+    assert any("not named" in r for r in evs[1].reasons) and evs[0].accepted_ok
+
+
+def test_an_effect_stays_when_it_beats_its_stand_in_by_two_points_or_the_stand_in_stops_at_a_bound():
+    for alt, bound in ((95.9, None), (98.0, "upper"), (99.0, "lower")):
+        (model, kept, found), calls, evs = stand_in_case(alt_score=alt, bound=bound)
+        assert kept == evs and model == "model" and found == [], (alt, bound)
+        assert len(calls) == 1 and evs[1].accepted_ok
+    # a payload named together with another effect was judged as a pair: not tried
+    members = dc.member_evaluations(judged(scored_pair(PAYLOAD, A)))
+    (model, kept, found), calls, _ = stand_in_case(alt_score=98.0, accepted=members)
+    assert calls == [] and kept == members and model == "model"
+
+
 def test_final_check_drops_both_members_of_a_pair_together():
     members = dc.member_evaluations(judged(scored_pair(A, C)))
     single = scored(B)

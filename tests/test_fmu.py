@@ -343,6 +343,7 @@ def test_robot_snapshot_loads_back_to_the_same_spec(tmp_path):
         assert spec.name != "lift" or spec.joints[0].components["cylinder"].values["offset"] == "auto"
         path = f"joints.{spec.joint_names[0]}.valve.rated_flow"
         spec.set(path, spec.parameters()[path] * 1.0123456789)
+        spec.set("links.mass_scale", 1.1)
         back = load_robot(write_snapshot(spec, tmp_path / robot))
         assert back.parameters() == spec.parameters()
         assert [e.to_dict() for e in back.effects] == [e.to_dict() for e in spec.effects]

@@ -15,6 +15,7 @@ from .directional_valve import DirectionalValve
 from .fluid import Fluid
 from .hose import Hose
 from .labview_adaptation import LabviewAdaptation
+from .links import LinkMasses
 from .potentiometer import Potentiometer
 from .proportional_solenoid import ProportionalSolenoid
 from .pump import Pump
@@ -26,5 +27,5 @@ ACTUATOR_KINDS = (Cylinder, RotaryActuator)
 
 __all__ = [
     "ACTUATOR_KINDS", "Amplifier", "Component", "Cylinder", "DirectionalValve", "Fluid", "Hose", "LabviewAdaptation",
-    "Parameter", "ParameterError", "Potentiometer", "ProportionalSolenoid", "Pump", "RotaryActuator", "Spool",
+    "LinkMasses", "Parameter", "ParameterError", "Potentiometer", "ProportionalSolenoid", "Pump", "RotaryActuator", "Spool",
 ]

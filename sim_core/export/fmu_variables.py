@@ -41,7 +41,7 @@ def _prismatic(spec, dof: str) -> bool:
 def parameter_entries(spec):
     """(path, Parameter declaration, prismatic) of every float parameter of ``spec``."""
     out = []
-    for sec in ("supply", "fluid", "integrator"):
+    for sec in ("supply", "fluid", "integrator", "links"):
         comp = getattr(spec, sec)
         out += [(f"{sec}.{p.name}", p, False) for p in comp.PARAMETERS]
     for j in spec.joints:

@@ -33,6 +33,7 @@ def snapshot_data(spec) -> dict:
         "integrator": _plain(spec.integrator.values),
         "fluid": _plain(spec.fluid.values),
         "supply": _plain(spec.supply.values),
+        "links": _plain(spec.links.values),
         "joints": joints,
     }
     if spec.passive:

@@ -8,12 +8,19 @@ What the baseline frees (:func:`plan`):
   that range: the user has said the number is a guess;
 * the nominal parameters a record can identify, but only when no effect of the candidate bank could
   stand in for them: supply pressure and oil bulk modulus when chamber pressures are recorded, the
-  actuators' viscous friction, and a payload mass on a joint whose record carries a gravity load.
+  actuators' viscous friction, a payload mass on a joint whose record carries a gravity load and the
+  links' masses as a whole (``links.mass_scale``) when one does.
   ``MIMICS`` lists, for each, the bank effects it can masquerade as (a lower bulk modulus *is* the
   ``bulk_modulus`` effect; a viscous friction absorbs most of a Coulomb friction; a payload mass is the
   ``payload`` effect). Freed while such an effect is searched, the calibration would absorb what
   ``diagnose`` exists to name; so for a built-in robot with the whole bank only the flow gains are
   freed, and a restricted bank (``--effects``) frees what no longer competes with it.
+
+A held parameter that is a different cause with an effect's signature (``STAND_IN_FOR``: links 15 %
+heavier than the URDF says load a joint as a point mass at its payload point does) is the effect's
+stand-in (``Plan.stand_ins``): an effect named by the search must explain the record better than its
+stand-in calibrated in its place (selection's stand-in pass); where it does not, the misfit is a
+calibration finding.
 
 After the fit each freed parameter is checked: identified when ``|value / sigma| >= 3`` and no
 correlation beyond ``CORRELATION_LIMIT`` ties it to another freed parameter (of such a pair the flow
@@ -40,6 +47,7 @@ GRAVITY_SHARE = 0.05         # gravity torque over the record >= 5 % of the actu
 SUPPLY_SPAN = 1.5            # supply pressure within x/÷ 1.5 of nominal
 BULK_SPAN = 3.0              # oil bulk modulus within x/÷ 3
 FRICTION_SPAN = 10.0         # viscous friction within x/÷ 10
+MASS_SPAN = 1.25             # the links' masses within x/÷ 1.25 (CAD without hoses, oil, bolts)
 
 # nominal parameter (kind) -> bank effects it can masquerade as
 MIMICS: dict[str, tuple[str, ...]] = {
@@ -47,6 +55,14 @@ MIMICS: dict[str, tuple[str, ...]] = {
     "bulk_modulus": ("bulk_modulus", "line_dynamics", "joint_compliance"),
     "viscous_friction": ("coulomb_friction", "stribeck_friction", "joint_compliance", "hysteresis"),
     "payload_mass": ("payload", "coulomb_friction", "sensor_gain", "valve_asymmetry"),
+    "link_masses": ("payload", "coulomb_friction", "sensor_gain", "valve_asymmetry"),
+}
+
+# nominal parameter (kind) -> the bank effects it is a different cause of the same signature for: held
+# for them, it is their stand-in, and an effect named must beat it (a distributed mass error against a
+# point mass)
+STAND_IN_FOR: dict[str, tuple[str, ...]] = {
+    "link_masses": ("payload",),
 }
 
 
@@ -72,6 +88,8 @@ class Plan:
     why: dict[str, str]
     held: dict[str, str] = field(default_factory=dict)
     switched: list[tuple[str, str | None]] = field(default_factory=list)   # effects switched on (name, joint)
+    # effect name -> held nominal parameters that could stand in for it (STAND_IN_FOR), ready to free
+    stand_ins: dict[str, list[FreeParameter]] = field(default_factory=dict)
 
     @property
     def keys(self) -> list[str]:
@@ -91,6 +109,7 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
     why: dict[str, str] = {}
     held: dict[str, str] = {}
     switched: list[tuple[str, str | None]] = []
+    stand_ins: dict[str, list[FreeParameter]] = {}
 
     def add(fp: FreeParameter, reason: str):
         if fp.key not in why:
@@ -118,6 +137,10 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
         rivals = competing(kind)
         if rivals:
             held[key] = f"held at nominal: could masquerade as {', '.join(rivals)} (mark it estimated to free it)"
+            for effect in (e for e in STAND_IN_FOR.get(kind, ()) if e in rivals):
+                fp = make()
+                if fp is not None:
+                    stand_ins.setdefault(effect, []).append(fp)
             return
         fp = make()
         if fp is not None:
@@ -136,7 +159,12 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
         key = f"effects.payload.{j}.mass"
         if key not in why and (competing("payload_mass") or gravity_share(spec, rec, j) >= GRAVITY_SHARE):
             consider(key, "payload_mass", lambda j=j: _payload(spec, j, switched), "the record carries a gravity load")
-    return Plan(free, why, held, switched)
+    # a payload mass freed already carries what the links' masses would (one number to a one-joint record)
+    if not any(k.startswith("effects.payload.") for k in why) and any(
+            gravity_share(spec, rec, j) >= GRAVITY_SHARE for j in rec.targets):
+        consider("links.mass_scale", "link_masses", lambda: _span(spec, "links.mass_scale", MASS_SPAN),
+                 "the record carries a gravity load")
+    return Plan(free, why, held, switched, stand_ins)
 
 
 def _span(spec, key: str, span: float) -> FreeParameter:

@@ -380,6 +380,42 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
     return model, accepted, tried
 
 
+# ---- stand-ins ----------------------------------------------------------------------------------------------
+def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Callable, refit_instead: Callable,
+             log=None):
+    """A named effect must explain the record better than a nominal parameter with its signature (a
+    stand-in, calibration.STAND_IN_FOR) calibrated in its place: where the model with the stand-in
+    freed instead scores within THRESHOLD_POINTS of ``full``, what the effect explained is a
+    calibration finding (links heavier than the URDF says, not a payload). A stand-in that stops at a
+    bound of its range (what a nominal parameter may plausibly be off by) does not: the record asks
+    for more than a calibration.
+
+    ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
+    ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
+    refitted, its score, the value ``p`` took, the bound it stops at or None). A member of a pair named together stays (the pair was
+    judged as one). Returns (model, accepted, [(ev, p, value, its model's score, full)] replaced)."""
+    log = log or (lambda msg: None)
+    accepted = list(accepted)
+    found = []
+    for ev in list(accepted):
+        if ev.pair is not None:
+            continue
+        for p in stand_ins(ev):
+            rest = [e for e in accepted if e is not ev]
+            alt, s, value, bound = refit_instead(model, ev, rest, p)
+            if full - s >= THRESHOLD_POINTS or bound is not None:
+                log(f"stand-in: {ev.candidate.label} stays ({getattr(p, 'key', p)} = {value:.4g}"
+                    + (f" at its {bound} bound" if bound else "") + f", {s - full:+.2f} points)")
+                continue
+            log(f"stand-in: {ev.candidate.label} replaced by a calibration ({full:.2f} -> {s:.2f} points)")
+            ev.reasons.append(f"not named: a calibration in its place ({getattr(p, 'key', p)} = {value:.4g}) explains the "
+                              f"record as well ({s - full:+.2f} points; an effect must win by {THRESHOLD_POINTS:g})")
+            found.append((ev, p, value, s, full))
+            accepted, model, full = rest, alt, s
+            break
+    return model, accepted, found
+
+
 # ---- backward pass and final check ----------------------------------------------------------------------
 def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None):
     """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:

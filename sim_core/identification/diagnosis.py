@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -272,8 +272,21 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                  uncalibrated={c["parameter"]: c["nominal"] for c in cal.changes if c["parameter"] in nuisance})
     # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
-                 recalibrate=recalibrate,
+                 recalibrate=recalibrate, stand_ins=pl.stand_ins,
                  misfit=lambda out: any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values()))
+    if sel.stand_ins:
+        # a stand-in took an effect's place: it is a calibration finding, so the baseline is calibrated
+        # again with it freed (the model the named effects, if any, and the report compare against)
+        extra = [replace(fp) for fp in {id(t[1]): t[1] for t in sel.stand_ins}.values()]
+        why = dict(pl.why)
+        for ev, fp, value, s_with, s_effect in sel.stand_ins:
+            why[fp.key] = (f"held for {ev.candidate.effect}, freed in place of {ev.candidate.label}: explains the "
+                           f"record as well ({s_with - s_effect:+.2f} points)")
+            pl.held.pop(fp.key, None)
+        pl.free, pl.why = pl.free + extra, why
+        cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
+        base_fast = cal.spec
+        keys[:] = refit_keys(cal.identified)
     timings["selection"] = time.perf_counter() - t_start
 
     # final refit of the chosen model with the default integrator settings (two Gauss-Newton steps from
@@ -375,7 +388,12 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "changes": cal.changes, "held": pl.held,
              "identified": cal.identified, "not_identified": [c["parameter"] for c in cal.changes if not c["identified"]],
              "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched],
-             "recalibrations": recalibrations}
+             "recalibrations": recalibrations,
+             "stand_ins": [{"parameter": fp.key, "value": value,
+                            "in_place_of": {"effect": ev.candidate.effect, "joint": ev.candidate.joint,
+                                            "params": {k: _num(v) for k, v in ev.effect_params().items()}},
+                            "score": round(s_with, 3), "score_with_effect": round(s_effect, 3)}
+                           for ev, fp, value, s_with, s_effect in sel.stand_ins]}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     ceilings = sel.channel_ceilings

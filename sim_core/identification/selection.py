@@ -19,7 +19,8 @@ remaining candidate jointly with everything accepted (a large effect masks the o
 gains are no guide), and stops when nothing passes or when the score is within the threshold of its
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
 threshold, and an exchange pass refits each earlier pick against its round's strongest rivals with
-the later effects in the model. The rules themselves are pure functions in decision.py; this module
+the later effects in the model, and a stand-in pass frees in each named effect's place the held
+nominal parameter that shares its signature (heavier links for a payload). The rules themselves are pure functions in decision.py; this module
 supplies the simulator-based steps they call (fit and score a candidate, score a model, refit
 without an effect).
 """
@@ -39,7 +40,8 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop)
+                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop,
+                       stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .side_by_side import SideBySide
@@ -325,17 +327,23 @@ class Selection:
     pairs: list[list[Evaluation]] = field(default_factory=list)    # the pair fits of each pair search
     # (kept, dropped) after the final check -> (accepted, fast model) with a pair that passes, or None
     resume: Callable | None = None
+    # the stand-in pass's replacements: (the effect's evaluation, its stand-in, the value it took,
+    # the score with the stand-in, the score with the effect)
+    stand_ins: list[tuple] = field(default_factory=list)
     channel_ceilings: dict[str, dict[str, float]] = field(default_factory=dict)   # joint -> channel -> ceiling
 
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
-           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None) -> Selection:
+           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None,
+           stand_ins: dict[str, list[FreeParameter]] | None = None) -> Selection:
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
     (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
     of candidate fits, pair fits, the validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
     effect is in it, its calibration redone (it may change ``st.calib_keys`` in place); None: the
     model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
-    condition for the pair search); None: no pair search."""
+    condition for the pair search); None: no pair search. ``stand_ins``: effect name -> the held
+    nominal parameters it must beat (calibration.Plan.stand_ins; decision.stand_in), freed in its place
+    after the other passes; one that takes the place joins ``st.calib_keys``."""
     log = log or (lambda msg: None)
     ceilings = channel_ceilings(st, st.val.joints)
     ceiling = score_ceiling(ceilings)
@@ -397,10 +405,30 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             swaps = [(old, new) for old, new in zip(before, accepted) if old is not new]
             if swaps:
                 stopped += "; " + ", ".join(f"{new.candidate.label} named in place of {old.candidate.label}" for old, new in swaps)
+    replaced: list[tuple] = []
+    if stand_ins and accepted:
+        def refit_instead(model, ev, rest, fp):
+            minus = without(base_spec, model, ev.candidate)
+            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
+            free = [f for f in free if f.key != fp.key] + [replace(fp)]
+            x0 = [f.get(minus) for f in free]
+            grid = [x0[:-1] + [fp.from_x(fp.to_x(x0[-1] * f))] for f in (1.0, 0.8, 1.25)]
+            res = oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
+                         uncertainty=False, tol=1e-3)
+            return res.spec, base.score(res.spec), float(res.values[fp.key]), res.at_bound(fp.key)
+
+        model, accepted, replaced = stand_in(accepted, model, base.score(model),
+                                             stand_ins=lambda ev: stand_ins.get(ev.candidate.effect, []),
+                                             refit_instead=refit_instead, log=log)
+        for ev, fp, value, _, _ in replaced:
+            if fp.key not in st.calib_keys:
+                st.calib_keys.append(fp.key)
+            stopped += f"; {fp.key} calibrated in place of {ev.candidate.label} (= {value:.4g})"
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
-    sel = Selection(accepted, rounds, model, values, stopped, ceiling, fw.pairs, channel_ceilings=ceilings)
+    sel = Selection(accepted, rounds, model, values, stopped, ceiling, fw.pairs, stand_ins=replaced,
+                    channel_ceilings=ceilings)
 
     def resume(kept, dropped):
         """decision.pairs_after_a_drop on the search's model without the dropped effects."""

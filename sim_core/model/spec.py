@@ -5,7 +5,8 @@ change goes through :meth:`RobotSpec.set` / :meth:`RobotSpec.enable_effect`, so 
 reported by its path and never reaches the kernel. Parameter paths::
 
     supply.pressure                       fluid.bulk_modulus            integrator.max_substep
-    joints.<joint>.<section>.<parameter>  joints.<joint>.initial_position
+    links.mass_scale                      joints.<joint>.<section>.<parameter>
+    joints.<joint>.initial_position
     passive.<joint>.initial_position
 
 Robot configurations are chosen by name, like python-can interfaces: the built-in ones live in
@@ -37,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from ..components import (
-    Amplifier, Cylinder, DirectionalValve, Fluid, Hose, LabviewAdaptation, Potentiometer,
+    Amplifier, Cylinder, DirectionalValve, Fluid, Hose, LabviewAdaptation, LinkMasses, Potentiometer,
     ProportionalSolenoid, Pump, RotaryActuator, Spool,
 )
 from ..components.base import Component, Parameter, ParameterError
@@ -109,6 +110,9 @@ class JointSettings(Component):
     )
 
 
+# the robot-wide sections: one component each, paths <section>.<parameter>
+GLOBAL_SECTIONS = ("integrator", "fluid", "supply", "links")
+
 SECTIONS: dict[str, type[Component]] = {
     "cfp": LabviewAdaptation,
     "amplifier": Amplifier,
@@ -170,6 +174,7 @@ class RobotSpec:
     # parameters the user does not know exactly: path -> (lower, upper) in the parameter's unit (the
     # [estimated] table; calibration may move them within these bounds)
     estimated: dict[str, tuple[float, float]] = field(default_factory=dict)
+    links: LinkMasses = field(default_factory=LinkMasses)     # [links]: a factor on the URDF's masses
 
     # ---- queries --------------------------------------------------------------------------------
     @property
@@ -203,7 +208,7 @@ class RobotSpec:
     def _resolve(self, path: str) -> tuple[Component, str]:
         parts = path.split(".")
         top = parts[0]
-        if top in ("supply", "fluid", "integrator") and len(parts) == 2:
+        if top in GLOBAL_SECTIONS and len(parts) == 2:
             return getattr(self, top), parts[1]
         if top == "joints" and len(parts) == 3:
             return self.joint(parts[1]).settings, parts[2]
@@ -219,7 +224,7 @@ class RobotSpec:
                 raise SpecError(f"{path}: {parts[1]!r} is not a passive joint of {self.name} ({', '.join(self.passive) or 'none'})")
             return self.passive[parts[1]], parts[2]
         raise SpecError(
-            f"unknown parameter path {path!r}; use supply.<p>, fluid.<p>, integrator.<p>, "
+            f"unknown parameter path {path!r}; use supply.<p>, fluid.<p>, integrator.<p>, links.<p>, "
             f"joints.<joint>.<section>.<p>, joints.<joint>.initial_position or passive.<joint>.initial_position"
         )
 
@@ -241,7 +246,7 @@ class RobotSpec:
     def parameters(self) -> dict[str, Any]:
         """Flat {path: value} of every parameter (read endpoints, reports)."""
         out: dict[str, Any] = {}
-        for sec in ("supply", "fluid", "integrator"):
+        for sec in ("supply", "fluid", "integrator", "links"):
             for k, v in getattr(self, sec).values.items():
                 out[f"{sec}.{k}"] = v
         for j in self.joints:
@@ -408,7 +413,7 @@ def _compose_arms(data: dict, where: Path) -> dict:
             sub = _compose_arms(sub, Path(arm["spec"]))
         prefix = arm["prefix"]
         modules = arm.get("cfp_modules", {})
-        for sec in ("integrator", "fluid", "supply"):
+        for sec in GLOBAL_SECTIONS:
             out.setdefault(sec, sub.get(sec, {}))
         for jname, jt in sub.get("joints", {}).items():
             merged = _merge(sub.get("defaults", {}), jt)
@@ -450,7 +455,7 @@ def _merge(defaults: dict, joint: dict) -> dict:
     return out
 
 
-TOP_LEVEL = ("robot", "integrator", "fluid", "supply", "defaults", "joints", "passive", "effects", "estimated")
+TOP_LEVEL = ("robot", "integrator", "fluid", "supply", "links", "defaults", "joints", "passive", "effects", "estimated")
 JOINT_KEYS = ("dof", "initial_position", "payload_frame")
 _LEADING_KEY = re.compile(r"^([A-Za-z0-9_\-\[\]]+(?:\.[A-Za-z0-9_\-\[\]]+)*): (.*)$", re.S)
 _UNKNOWN = re.compile(r"^unknown parameter\(s\) ([A-Za-z0-9_\-]+)")
@@ -633,6 +638,7 @@ def load_robot(name_or_path: str | Path) -> RobotSpec:
         integrator=comp(Integrator, data.get("integrator", {}), "integrator"),
         fluid=comp(Fluid, data.get("fluid", {}), "fluid"),
         supply=comp(Pump, data.get("supply", {}), "supply"),
+        links=comp(LinkMasses, data.get("links", {}), "links"),
         joints=joints,
         passive=passive,
         source=path,
