@@ -392,8 +392,9 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
 
     ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
     ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
-    refitted, its score, the value ``p`` took, the bound it stops at or None). A member of a pair named together stays (the pair was
-    judged as one). Returns (model, accepted, [(ev, p, value, its model's score, full)] replaced)."""
+    refitted, its score, the value ``p`` took, the bound it stops at or None). A member of a pair
+    named together stays (the pair was judged as one). Returns (model, accepted, [(ev, p, value, its
+    model's score, full)] replaced)."""
     log = log or (lambda msg: None)
     accepted = list(accepted)
     found = []

@@ -20,9 +20,9 @@ gains are no guide), and stops when nothing passes or when the score is within t
 noise ceiling; a backward pass then drops any accepted effect whose removal costs less than the
 threshold, and an exchange pass refits each earlier pick against its round's strongest rivals with
 the later effects in the model, and a stand-in pass frees in each named effect's place the held
-nominal parameter that shares its signature (heavier links for a payload). The rules themselves are pure functions in decision.py; this module
-supplies the simulator-based steps they call (fit and score a candidate, score a model, refit
-without an effect).
+nominal parameter that shares its signature (heavier links for a payload). The rules themselves are
+pure functions in decision.py; this module supplies the simulator-based steps they call (fit and
+score a candidate, score a model, refit without an effect).
 """
 
 from __future__ import annotations

@@ -92,6 +92,7 @@ def describe_robot(spec: RobotSpec) -> dict:
         "supply": _params(spec.supply, False, False),
         "fluid": _params(spec.fluid, False, False),
         "integrator": _params(spec.integrator, False, False),
+        "links": _params(spec.links, False, False),
         "estimated": {k: list(v) for k, v in spec.estimated.items()},
         "estimated_units": {k: _estimated_unit(spec, k) for k in spec.estimated},
     }
