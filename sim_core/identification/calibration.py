@@ -31,6 +31,7 @@ to its nominal value, the rest refitted; a misfit the calibration explains is a 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -137,10 +138,10 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
         rivals = competing(kind)
         if rivals:
             held[key] = f"held at nominal: could masquerade as {', '.join(rivals)} (mark it estimated to free it)"
-            for effect in (e for e in STAND_IN_FOR.get(kind, ()) if e in rivals):
-                fp = make()
-                if fp is not None:
-                    stand_ins.setdefault(effect, []).append(fp)
+            stands_for = [e for e in STAND_IN_FOR.get(kind, ()) if e in rivals]
+            fp = make() if stands_for else None
+            for effect in stands_for if fp is not None else ():
+                stand_ins.setdefault(effect, []).append(fp)
             return
         fp = make()
         if fp is not None:
@@ -151,17 +152,20 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
                  "pressures recorded")
         consider("fluid.bulk_modulus", "bulk_modulus", lambda: _span(spec, "fluid.bulk_modulus", BULK_SPAN),
                  "pressures recorded")
+    @functools.cache
+    def loaded(j: str) -> bool:
+        return gravity_share(spec, rec, j) >= GRAVITY_SHARE
+
     for j in rec.targets:
         js = spec.joint(j)
         key = f"joints.{j}.{js.kind}.viscous_friction"
         if spec.get(key) > 0:
             consider(key, "viscous_friction", lambda key=key: _span(spec, key, FRICTION_SPAN), "the joint moves")
         key = f"effects.payload.{j}.mass"
-        if key not in why and (competing("payload_mass") or gravity_share(spec, rec, j) >= GRAVITY_SHARE):
+        if key not in why and (competing("payload_mass") or loaded(j)):
             consider(key, "payload_mass", lambda j=j: _payload(spec, j, switched), "the record carries a gravity load")
     # a payload mass freed already carries what the links' masses would (one number to a one-joint record)
-    if not any(k.startswith("effects.payload.") for k in why) and any(
-            gravity_share(spec, rec, j) >= GRAVITY_SHARE for j in rec.targets):
+    if not any(k.startswith("effects.payload.") for k in why) and any(loaded(j) for j in rec.targets):
         consider("links.mass_scale", "link_masses", lambda: _span(spec, "links.mass_scale", MASS_SPAN),
                  "the record carries a gravity load")
     return Plan(free, why, held, switched, stand_ins)

@@ -277,7 +277,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if sel.stand_ins:
         # a stand-in took an effect's place: it is a calibration finding, so the baseline is calibrated
         # again with it freed (the model the named effects, if any, and the report compare against)
-        extra = [replace(fp) for fp in {id(t[1]): t[1] for t in sel.stand_ins}.values()]
+        extra = [replace(fp) for fp in {t[1].key: t[1] for t in sel.stand_ins}.values()]
         why = dict(pl.why)
         for ev, fp, value, s_with, s_effect in sel.stand_ins:
             why[fp.key] = (f"held for {ev.candidate.effect}, freed in place of {ev.candidate.label}: explains the "

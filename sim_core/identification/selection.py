@@ -338,9 +338,9 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
            stand_ins: dict[str, list[FreeParameter]] | None = None) -> Selection:
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
     (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
-    of candidate fits, pair fits, the validation score, a refit without one effect. ``recalibrate(model, ev)``: the model once ``ev``'s
-    effect is in it, its calibration redone (it may change ``st.calib_keys`` in place); None: the
-    model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
+    of candidate fits, pair fits, the validation score, a refit without one effect.
+    ``recalibrate(model, ev)``: the model once ``ev``'s effect is in it, its calibration redone (it may
+    change ``st.calib_keys`` in place); None: the model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
     condition for the pair search); None: no pair search. ``stand_ins``: effect name -> the held
     nominal parameters it must beat (calibration.Plan.stand_ins; decision.stand_in), freed in its place
     after the other passes; one that takes the place joins ``st.calib_keys``."""
@@ -386,9 +386,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             hit = refits.get((id(model), id(ev)))
             if hit is not None and hit[0] is model and hit[1] is ev:
                 return hit[2]
-            minus = without(base_spec, model, ev.candidate)
-            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
-            res = oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
+            res = _refit_rest(st, base_spec, model, ev, rest)
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return refits[(id(model), id(ev))][2]
 
@@ -408,13 +406,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     replaced: list[tuple] = []
     if stand_ins and accepted:
         def refit_instead(model, ev, rest, fp):
-            minus = without(base_spec, model, ev.candidate)
-            free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
-            free = [f for f in free if f.key != fp.key] + [replace(fp)]
-            x0 = [f.get(minus) for f in free]
-            grid = [x0[:-1] + [fp.from_x(fp.to_x(x0[-1] * f))] for f in (1.0, 0.8, 1.25)]
-            res = oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
-                         uncertainty=False, tol=1e-3)
+            res = _refit_rest(st, base_spec, model, ev, rest, instead=fp)
             return res.spec, base.score(res.spec), float(res.values[fp.key]), res.at_bound(fp.key)
 
         model, accepted, replaced = stand_in(accepted, model, base.score(model),
@@ -452,6 +444,22 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 
     sel.resume = resume
     return sel
+
+
+def _refit_rest(st: Setting, base_spec, model, ev: Evaluation, rest: list[Evaluation],
+                instead: FreeParameter | None = None) -> oe.FitResult:
+    """``model`` without ``ev``'s effect, the ``rest`` and the calibration refitted (the backward and
+    exchange passes); with ``instead`` (a held nominal parameter) freed as well, started at its value
+    and x 0.8, x 1.25 (the stand-in pass)."""
+    minus = without(base_spec, model, ev.candidate)
+    free = free_list(minus, None, [(e.candidate, e.effect_params()) for e in rest], st.calib_keys, st.ranges)
+    if instead is None:
+        return oe.fit(st.est_runner, st.est, minus, free, max_sims=st.max_sims, uncertainty=False, tol=1e-3)
+    free = [f for f in free if f.key != instead.key] + [replace(instead)]
+    x0 = [f.get(minus) for f in free]
+    grid = [x0[:-1] + [instead.from_x(instead.to_x(x0[-1] * f))] for f in (1.0, 0.8, 1.25)]
+    return oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
+                  uncertainty=False, tol=1e-3)
 
 
 def _extend(model, ev: Evaluation, recalibrate):
