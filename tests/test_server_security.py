@@ -132,6 +132,20 @@ def test_every_protected_endpoint_refuses_a_missing_or_wrong_token(tmp_path):
         srv.stop()
 
 
+def close_code(ws, within_s: float = 15.0):
+    """The close code the server sent on ``ws``, or None if it still streams after ``within_s``."""
+    end = time.monotonic() + within_s
+    try:
+        while time.monotonic() < end:
+            try:
+                ws.recv(timeout=max(end - time.monotonic(), 0.01))
+            except TimeoutError:
+                return None
+    except websockets.exceptions.ConnectionClosed as closed:
+        return closed.rcvd.code if closed.rcvd is not None else -1
+    return None
+
+
 def test_the_viewer_websocket_refuses_foreign_origins(tmp_path):
     import viser
     from websockets.sync.client import connect
@@ -143,10 +157,7 @@ def test_the_viewer_websocket_refuses_foreign_origins(tmp_path):
         proto = [f"viser-v{viser.__version__}"]
         for origin in ("http://evil.example", f"http://evil.example:{vport}", "http://127.0.0.1:1"):
             with connect(f"ws://127.0.0.1:{vport}", subprotocols=proto, origin=origin, open_timeout=10) as ws:
-                with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
-                    while True:
-                        ws.recv(timeout=10)
-                assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008, origin
+                assert close_code(ws) == 1008, origin
         # the page's own origin is served (the panel arrives)
         with connect(f"ws://127.0.0.1:{vport}", subprotocols=proto, origin=f"http://127.0.0.1:{vport}",
                      open_timeout=10) as ws:
@@ -154,3 +165,28 @@ def test_the_viewer_websocket_refuses_foreign_origins(tmp_path):
         assert "refused a WebSocket from Origin 'http://evil.example'" in srv.log_text()
     finally:
         srv.stop()
+
+
+def test_a_viewer_websocket_opened_before_the_guard_is_installed_is_checked_too():
+    """viser serves from inside its constructor, before the guard exists: installing the guard checks
+    the connections already open, so a page that connects in that window is refused all the same."""
+    import viser
+    from websockets.sync.client import connect
+
+    from web.origin_guard import OriginGuard
+
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    try:
+        port = server.get_port()
+        url, proto = f"ws://127.0.0.1:{port}", [f"viser-v{viser.__version__}"]
+        with connect(url, subprotocols=proto, origin="http://evil.example", open_timeout=10) as evil, \
+                connect(url, subprotocols=proto, origin=f"http://127.0.0.1:{port}", open_timeout=10) as own:
+            live = server._websock_server._live_connections
+            wait_for(lambda: len(live) == 2, 10, "both connections to be live")
+            guard = OriginGuard(server, bind_is_loopback=True)
+            assert close_code(evil) == 1008
+            assert guard.refused == 1 and len(guard.accepted) == 1
+            assert guard.allowed(next(iter(guard.accepted)))
+            assert close_code(own, within_s=1.0) is None          # the page's own origin stays open
+    finally:
+        server.stop()
