@@ -29,8 +29,8 @@ def main(port: int, dbc: str, joint: str, target: float, ticks: int, kp: float) 
         deadline = time.monotonic() + 5.0
         while True:
             m = bus.recv(max(0.0, deadline - time.monotonic()))
-            if m is None:
-                raise SystemExit(f"tick {k}: no feedback of {joint} within 5 s")
+            if m is None or time.monotonic() > deadline:
+                raise SystemExit(f"tick {k}: no new feedback of {joint} within 5 s")
             if m.arbitration_id == fb.frame_id:
                 d = fb.decode(m.data)
                 if d["counter"] != counter:
