@@ -61,9 +61,20 @@ def _spans(mask: np.ndarray, t: np.ndarray):
     return [(t[a], t[min(b, t.size - 1)]) for a, b in zip(starts, stops)]
 
 
+# fixed margins (inches) on every figure: laid out once, instead of measured by a second drawing pass
+# (``bbox_inches="tight"`` costs each figure about as much again as drawing it)
+MARGINS_IN = {"left": 0.8, "right": 0.12, "bottom": 0.5, "top": 0.3, "between": 0.65}
+
+
 def _png(fig) -> str:
+    w, h = fig.get_size_inches()
+    m = MARGINS_IN
+    cols = max(1, len(fig.axes))
+    panel = (w - m["left"] - m["right"] - (cols - 1) * m["between"]) / cols
+    fig.subplots_adjust(left=m["left"] / w, right=1 - m["right"] / w, bottom=m["bottom"] / h, top=1 - m["top"] / h,
+                        wspace=m["between"] / panel)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=90)
     import matplotlib.pyplot as plt
 
     plt.close(fig)
