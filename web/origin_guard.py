@@ -27,6 +27,7 @@ import urllib.parse
 log = logging.getLogger("hydrohil.web")
 
 LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1", "[::1]"}
+OPEN_CHECK_TIMEOUT_S = 10.0     # the check of already open connections waits this long for viser's loop
 
 
 def _host_port(netloc: str, default_port: int) -> tuple[str, int]:
@@ -56,11 +57,12 @@ def origin_allowed(origin: str | None, host_header: str | None, bind_is_loopback
 
 
 class OriginGuard:
-    def __init__(self, viser_server, bind_is_loopback: bool, *, sweep_timeout_s: float = 10.0):
+    def __init__(self, viser_server, bind_is_loopback: bool):
         self.bind_is_loopback = bind_is_loopback
         self.accepted: set[int] = set()
         self.refused = 0
         self._checked: set[int] = set()
+        self._closing: set[asyncio.Task] = set()      # referenced until done (the loop keeps weak ones)
         self._lock = threading.Lock()
         try:
             ws_server = viser_server._websock_server
@@ -72,7 +74,7 @@ class OriginGuard:
             raise RuntimeError(f"this viser version offers no way to check WebSocket Origins ({exc}); "
                                "the viewer does not start unguarded") from None
         if loop is not None:
-            asyncio.run_coroutine_threadsafe(self._check_open(), loop).result(timeout=sweep_timeout_s)
+            asyncio.run_coroutine_threadsafe(self._check_open(), loop).result(timeout=OPEN_CHECK_TIMEOUT_S)
 
     def allowed(self, client_id) -> bool:
         with self._lock:
@@ -106,7 +108,9 @@ class OriginGuard:
         (a client that never answers the close must not hold up the viewer's start)."""
         for client_id, ws in tuple(self._connections.items()):
             if self._admit(client_id, ws) is False:
-                asyncio.ensure_future(ws.close(1008, "foreign Origin"))
+                task = asyncio.get_running_loop().create_task(ws.close(1008, "foreign Origin"))
+                self._closing.add(task)
+                task.add_done_callback(self._closing.discard)
 
     async def _on_disconnect(self, conn) -> None:
         with self._lock:

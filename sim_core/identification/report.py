@@ -69,7 +69,7 @@ MARGINS_IN = {"left": 0.8, "right": 0.12, "bottom": 0.5, "top": 0.3, "between": 
 def _png(fig) -> str:
     w, h = fig.get_size_inches()
     m = MARGINS_IN
-    cols = max(1, len(fig.axes))
+    cols = max(1, len(fig.axes))         # every figure here is one row of panels
     panel = (w - m["left"] - m["right"] - (cols - 1) * m["between"]) / cols
     fig.subplots_adjust(left=m["left"] / w, right=1 - m["right"] / w, bottom=m["bottom"] / h, top=1 - m["top"] / h,
                         wspace=m["between"] / panel)
