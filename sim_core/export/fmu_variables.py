@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..model.spec import GLOBAL_SECTIONS
 from .fmi_names import FmiNameError, path_name, signal_name
 from .units import for_joint_type
 
@@ -41,7 +42,7 @@ def _prismatic(spec, dof: str) -> bool:
 def parameter_entries(spec):
     """(path, Parameter declaration, prismatic) of every float parameter of ``spec``."""
     out = []
-    for sec in ("supply", "fluid", "integrator", "links"):
+    for sec in GLOBAL_SECTIONS:
         comp = getattr(spec, sec)
         out += [(f"{sec}.{p.name}", p, False) for p in comp.PARAMETERS]
     for j in spec.joints:

@@ -8,7 +8,7 @@ import math
 from typing import Any
 
 from ..effects import EFFECTS
-from .spec import ROBOTS_DIR, RobotSpec, estimable
+from .spec import GLOBAL_SECTIONS, ROBOTS_DIR, RobotSpec, estimable
 
 # units declared for a revolute joint that read differently on a prismatic one (referred to the joint)
 _PRISMATIC = {"rad": "m", "rad/V": "m/V", "rad/s": "m/s", "N m": "N", "N m s/rad": "N s/m"}
@@ -89,10 +89,7 @@ def describe_robot(spec: RobotSpec) -> dict:
         "joints": joints,
         "passive_joints": passive,
         "global_effects": [{"name": e.name, "params": dict(e.params)} for e in spec.effects if e.joint is None],
-        "supply": _params(spec.supply, False, False),
-        "fluid": _params(spec.fluid, False, False),
-        "integrator": _params(spec.integrator, False, False),
-        "links": _params(spec.links, False, False),
+        **{sec: _params(getattr(spec, sec), False, False) for sec in GLOBAL_SECTIONS},
         "estimated": {k: list(v) for k, v in spec.estimated.items()},
         "estimated_units": {k: _estimated_unit(spec, k) for k in spec.estimated},
     }

@@ -110,8 +110,8 @@ class JointSettings(Component):
     )
 
 
-# the robot-wide sections: one component each, paths <section>.<parameter>
-GLOBAL_SECTIONS = ("integrator", "fluid", "supply", "links")
+# the robot-wide sections: one component each, paths <section>.<parameter> (listed in this order)
+GLOBAL_SECTIONS = ("supply", "fluid", "integrator", "links")
 
 SECTIONS: dict[str, type[Component]] = {
     "cfp": LabviewAdaptation,
@@ -246,7 +246,7 @@ class RobotSpec:
     def parameters(self) -> dict[str, Any]:
         """Flat {path: value} of every parameter (read endpoints, reports)."""
         out: dict[str, Any] = {}
-        for sec in ("supply", "fluid", "integrator", "links"):
+        for sec in GLOBAL_SECTIONS:
             for k, v in getattr(self, sec).values.items():
                 out[f"{sec}.{k}"] = v
         for j in self.joints:
