@@ -62,23 +62,36 @@ def _spans(mask: np.ndarray, t: np.ndarray):
 
 
 # fixed margins (inches) on every figure: laid out once, instead of measured by a second drawing pass
-# (``bbox_inches="tight"`` costs each figure about as much again as drawing it)
-MARGINS_IN = {"left": 0.8, "right": 0.12, "bottom": 0.5, "top": 0.3, "between": 0.65}
+# (``bbox_inches="tight"`` costs each figure about as much again as drawing it). They hold tick labels
+# of up to six characters: linear axes switch to an offset exponent outside 0.01-10^4 (``SCI_LIMITS``)
+# instead of writing -0.0025 in full.
+MARGINS_IN = {"left": 0.9, "right": 0.12, "bottom": 0.5, "top": 0.3, "between": 0.9}
+SCI_LIMITS = (-2, 4)
 
 
 def _png(fig) -> str:
-    w, h = fig.get_size_inches()
-    m = MARGINS_IN
-    cols = max(1, len(fig.axes))         # every figure here is one row of panels
-    panel = (w - m["left"] - m["right"] - (cols - 1) * m["between"]) / cols
-    fig.subplots_adjust(left=m["left"] / w, right=1 - m["right"] / w, bottom=m["bottom"] / h, top=1 - m["top"] / h,
-                        wspace=m["between"] / panel)
+    layout(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     import matplotlib.pyplot as plt
 
     plt.close(fig)
     return base64.b64encode(buf.getvalue()).decode()
+
+
+def layout(fig) -> None:
+    """Place a figure of one row of panels by ``MARGINS_IN`` (no drawing needed)."""
+    from matplotlib.ticker import ScalarFormatter
+
+    for ax in fig.axes:
+        if isinstance(ax.yaxis.get_major_formatter(), ScalarFormatter):
+            ax.ticklabel_format(axis="y", style="sci", scilimits=SCI_LIMITS)
+    w, h = fig.get_size_inches()
+    m = MARGINS_IN
+    cols = max(1, len(fig.axes))         # every figure here is one row of panels
+    panel = (w - m["left"] - m["right"] - (cols - 1) * m["between"]) / cols
+    fig.subplots_adjust(left=m["left"] / w, right=1 - m["right"] / w, bottom=m["bottom"] / h, top=1 - m["top"] / h,
+                        wspace=m["between"] / panel)
 
 
 # drawn in this order, the slowest first (the spectrum's log axis lays out the most text), so that
