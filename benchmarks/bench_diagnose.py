@@ -67,6 +67,7 @@ def main():
         rec = load_record(tmp / f"{name}.csv", spec)
         for w in worker_sets:
             t0 = time.perf_counter()
+            report.preload()                    # as the CLI does before an HTML report
             d = diagnosis.run(spec, rec, workers=w, progress=False)
             report.write(d, tmp / f"report_{name}_{w}", spec)       # the plots are part of the command
             el = time.perf_counter() - t0

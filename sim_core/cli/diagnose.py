@@ -69,6 +69,8 @@ def run(args):
         log(f"candidate fits on {backend.describe()}")
     elif args.address:
         raise CliError("--address is for --backend ray")
+    if args.format == "html":
+        report.preload()             # the figures' library, imported while the diagnosis starts on one core
     try:
         d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
                           log=log, effects=args.effects, backend=backend)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import background_import
 from ..effects import EFFECTS
 from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
@@ -124,7 +125,19 @@ def _forked_figure(job) -> str:
     return _figure(_FORKED["diagnosis"], *job)
 
 
+def preload() -> None:
+    """Start importing the plotting library in the background (:mod:`sim_core.background_import`):
+    a caller that will draw a report calls this before the diagnosis, whose first second leaves a
+    core free."""
+    background_import.start(_load_pyplot)
+
+
 def _pyplot():
+    background_import.wait()       # not while a preload may still be setting the backend
+    return _load_pyplot()
+
+
+def _load_pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
