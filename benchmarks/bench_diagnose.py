@@ -4,7 +4,7 @@ deadband on the HydroLek shoulder, and a clean record); the diagnosis and its re
 does, in this process. Reference measured in the same run: one free-run simulation of the record at the default
 integrator settings, so the figure also reads as "diagnose costs N simulations".
 
-    .venv/bin/python benchmarks/bench_diagnose.py [--workers N] [--sequential] [--json]
+    .venv/bin/python benchmarks/bench_diagnose.py [--workers N] [--sequential] [--json] [--no-preload]
 
 ``--sequential`` also times one worker, to show the parallel speed-up. The machine's load average is
 printed: other work on the machine slows every figure.
@@ -34,6 +34,8 @@ def main():
     ap.add_argument("--workers", type=int, default=0, help="0: CPU count")
     ap.add_argument("--sequential", action="store_true", help="also time one worker")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-preload", action="store_true",
+                    help="import pyplot only when the report draws (to compare: the first record's figure pays it)")
     args = ap.parse_args()
 
     from sim_core.identification import diagnosis, report
@@ -67,7 +69,8 @@ def main():
         rec = load_record(tmp / f"{name}.csv", spec)
         for w in worker_sets:
             t0 = time.perf_counter()
-            report.preload()                    # as the CLI does before an HTML report
+            if not args.no_preload:
+                report.preload()                # as the CLI does before an HTML report
             d = diagnosis.run(spec, rec, workers=w, progress=False)
             report.write(d, tmp / f"report_{name}_{w}", spec)       # the plots are part of the command
             el = time.perf_counter() - t0
