@@ -30,7 +30,9 @@ def start(load: Callable[[], object]) -> None:
         except Exception:       # noqa: BLE001 - the foreground import reports it
             pass
 
-    t = threading.Thread(target=run, name="background-import", daemon=True)
+    # not a daemon: the interpreter's exit waits for it, instead of finalising beside a half-done
+    # import whose module locks an exit handler might need
+    t = threading.Thread(target=run, name="background-import", daemon=False)
     with _guard:
         t.start()
         _running.append(t)
