@@ -34,17 +34,17 @@ def start(load: Callable[[], object]) -> None:
     # import whose module locks an exit handler might need
     t = threading.Thread(target=run, name="background-import", daemon=False)
     with _guard:
+        _running[:] = [r for r in _running if r.is_alive()]
         t.start()
         _running.append(t)
 
 
 def wait() -> None:
-    """Return once every import started here has finished."""
-    while True:
-        with _guard:
-            if not _running:
-                return
-            t = _running.pop()
+    """Return once every import started here has finished (also when another thread waits too: a
+    thread stays listed until it is done, so no waiter returns while one still runs)."""
+    with _guard:
+        running = list(_running)
+    for t in running:
         t.join()
 
 

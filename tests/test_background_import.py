@@ -37,6 +37,17 @@ def test_wait_returns_once_every_import_has_finished():
     assert time.perf_counter() - t0 < 0.1
 
 
+def test_a_second_waiter_also_waits_for_the_import_another_thread_waits_for():
+    done = threading.Event()
+    background_import.start(_slow(done))
+    first = threading.Thread(target=background_import.wait)
+    first.start()
+    time.sleep(0.1)                   # the first waiter is joining the import
+    background_import.wait()
+    assert done.is_set()
+    first.join()
+
+
 def test_a_failing_import_is_not_raised_in_the_background(monkeypatch):
     raised = []
     monkeypatch.setattr(threading, "excepthook", lambda args: raised.append(args.exc_value))
