@@ -49,6 +49,7 @@ def run_serve(args) -> int:
     from sim_core.model.spec import SpecError
 
     from .api.app import create_app
+    from .api.http_server import uvicorn_config
     from .security import SecurityError, check_bind, is_loopback, resolve_token
     from .service import HilService, ServiceConfig, ServiceError
 
@@ -105,8 +106,7 @@ def run_serve(args) -> int:
 
     gc.collect()
     gc.freeze()
-    server = uvicorn.Server(uvicorn.Config(app, host=cfg.host, port=cfg.port, log_level="warning", access_log=False,
-                                           lifespan="on"))
+    server = uvicorn.Server(uvicorn_config(app, host=cfg.host, port=cfg.port, lifespan="on"))
     # uvicorn handles SIGTERM/SIGINT while serving (graceful shutdown: the lifespan closes the service,
     # recordings are flushed), then re-raises the signal under the handlers it found. With these no-op
     # handlers in place a clean stop exits 0 instead of dying by the signal.

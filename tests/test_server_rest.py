@@ -272,3 +272,27 @@ def test_recording_under_load_has_every_tick_once(server, http):
     assert set(np.unique(ds["u_j2"])) <= {3.0, -3.0, 0.0}
     assert http.get("/api/v1/recordings").json()["recordings"][0]["id"] == "load_test"
     assert http.get("/api/v1/recordings/nope/data").status_code == 404
+
+
+def test_an_idle_keep_alive_connection_outlives_the_clients_pool_expiry(server):
+    """The server must not close an idle connection before a client's pool would (httpx: 5 s idle):
+    otherwise a request sent just before the client's expiry can meet the server's close and fail."""
+    import http.client
+    from urllib.parse import urlsplit
+
+    expiry = httpx.Limits(max_connections=None).keepalive_expiry
+    u = urlsplit(server.url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+    try:
+        conn.request("GET", "/api/v1/health", headers=server.headers())
+        first = conn.getresponse()
+        first.read()
+        sock = conn.sock
+        assert first.status == 200 and sock is not None and not first.will_close
+        time.sleep(expiry + 1.0)
+        conn.request("GET", "/api/v1/health", headers=server.headers())
+        again = conn.getresponse()        # a closed connection: RemoteDisconnected here
+        again.read()
+        assert again.status == 200 and conn.sock is sock   # the same connection, still open
+    finally:
+        conn.close()

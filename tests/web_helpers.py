@@ -61,6 +61,7 @@ class InProcessServer:
         import uvicorn
 
         from hil_server.api.app import create_app
+        from hil_server.api.http_server import uvicorn_config
         from hil_server.service import HilService, ServiceConfig
 
         self.port = free_port()
@@ -80,8 +81,8 @@ class InProcessServer:
                 self.viewer = self.svc.plugins[0].wait(90)  # the plugin builds its viewer in the background
             else:
                 self.viewer = None
-            self.server = uvicorn.Server(uvicorn.Config(create_app(self.svc, close_on_shutdown=False), host="127.0.0.1",
-                                                        port=self.port, log_level="warning", access_log=False))
+            self.server = uvicorn.Server(uvicorn_config(create_app(self.svc, close_on_shutdown=False), host="127.0.0.1",
+                                                       port=self.port))
             self.thread = threading.Thread(target=self.server.run, daemon=True)
             self.thread.start()
             wait_for(lambda: self.server.started, 30, "uvicorn to start")
