@@ -30,7 +30,6 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
-import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -44,6 +43,7 @@ from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFIC
                        stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
+from .progress import RoundProgress
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner
 
@@ -267,21 +267,20 @@ def evaluate_all(st: Setting, cands: list[Candidate], base_spec, accepted, base_
     workers = workers or min(len(cands), os.cpu_count() or 1)
     order = sorted(range(len(cands)), key=lambda i: -len(cands[i].free) * (1 + len(cands[i].grid)))
     results: list[Evaluation | None] = [None] * len(cands)
-    bar = _progress(len(cands), f"round {round_}: fitting {len(cands)} candidates", progress)
+    bar = RoundProgress(len(cands), f"round {round_}: fitting {len(cands)} candidates", progress)
     if backend is not None:
         for o in backend.map(_task, shared, order):
             if o.error is not None:
                 raise o.error
             i, ev = o.value
             results[i] = ev
-            bar.set_postfix_str(f"{ev.candidate.label} {ev.gain:+.1f}", refresh=False)
-            bar.update(1)
+            bar.done(ev)
     elif workers <= 1 or len(cands) <= 1:
         _init_worker(shared)
         for i in order:
             _, ev = _work(i)
             results[i] = ev
-            bar.update(1)
+            bar.done(ev)
     else:
         methods = multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
@@ -291,16 +290,9 @@ def evaluate_all(st: Setting, cands: list[Candidate], base_spec, accepted, base_
             for f in as_completed(futures):
                 i, ev = f.result()
                 results[i] = ev
-                bar.set_postfix_str(f"{ev.candidate.label} {ev.gain:+.1f}", refresh=False)
-                bar.update(1)
+                bar.done(ev)
     bar.close()
     return [r for r in results if r is not None]
-
-
-def _progress(total: int, desc: str, enabled: bool):
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=desc, unit="fit", disable=not enabled, file=sys.stderr, leave=False)
 
 
 # ---- masked pairs ----------------------------------------------------------------------------------
