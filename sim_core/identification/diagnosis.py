@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import output_error as oe
+from . import polarity
 from .calibration import calibrate, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
@@ -399,6 +400,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
                                ceilings, closed_loop=bool(loop["closed_loop"]))
+    if unexplained:
+        # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
+        # bank: say so, with the replay that fixes it
+        signs = polarity.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
+        if signs:
+            unexplained["polarity"] = signs
+            unexplained["record_causes"] = polarity.causes(signs, spec) + unexplained["record_causes"]
     if unexplained and selected:
         # a named cause must explain the record: the effects tried stay in the report as the closest
         # candidates, the model is not extended
