@@ -154,6 +154,8 @@ def test_estimated_table_two_shapes_and_errors(cli, tmp_path):
         ('"joints.lift.valve.rated_flow" = [0.0, 4e-4]', "leaves the parameter's bounds [1e-07, 0.1]"),
         ('"joints.lift.hose.flow_regime" = [0.0, 1.0]', "not a number parameter"),
         ('"effects.deadband.lift.width" = [0.0, 1.0]', "no such effect enabled"),
+        # a prismatic joint's sensor gain reads in m/V, as the joint's position does in m
+        ('"joints.lift.sensor.A" = [-0.06, -0.04]', "lies outside its estimated range [-0.06, -0.04] m/V"),
     ]
     for i, (entry, expect) in enumerate(cases):
         d = _rig(tmp_path, lambda t: t + "\n[estimated]\n" + entry + "\n", name=f"e{i}")

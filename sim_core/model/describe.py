@@ -8,19 +8,7 @@ import math
 from typing import Any
 
 from ..effects import EFFECTS
-from .spec import GLOBAL_SECTIONS, ROBOTS_DIR, RobotSpec, estimable
-
-# units declared for a revolute joint that read differently on a prismatic one (referred to the joint)
-_PRISMATIC = {"rad": "m", "rad/V": "m/V", "rad/s": "m/s", "N m": "N", "N m s/rad": "N s/m"}
-
-
-def joint_unit(unit: str, prismatic: bool, joint_referred: bool = True) -> str:
-    """A declared unit resolved to the joint's kind: 'N m or N' -> the first (revolute) or second
-    (prismatic); a revolute unit of a joint-referred parameter (sensor, initial position) -> its linear one."""
-    kinds = unit.split(" or ")
-    if len(kinds) == 2:
-        return kinds[1] if prismatic else kinds[0]
-    return _PRISMATIC.get(unit, unit) if prismatic and joint_referred else unit
+from .spec import GLOBAL_SECTIONS, ROBOTS_DIR, RobotSpec, estimated_unit, joint_unit
 
 
 def _value(v: Any) -> Any:
@@ -91,16 +79,5 @@ def describe_robot(spec: RobotSpec) -> dict:
         "global_effects": [{"name": e.name, "params": dict(e.params)} for e in spec.effects if e.joint is None],
         **{sec: _params(getattr(spec, sec), False, False) for sec in GLOBAL_SECTIONS},
         "estimated": {k: list(v) for k, v in spec.estimated.items()},
-        "estimated_units": {k: _estimated_unit(spec, k) for k in spec.estimated},
+        "estimated_units": {k: estimated_unit(spec, k) for k in spec.estimated},
     }
-
-
-def _estimated_unit(spec: RobotSpec, key: str) -> str:
-    param, _ = estimable(spec, key)
-    parts = key.split(".")
-    joint = parts[1] if parts[0] == "joints" else parts[2] if parts[0] == "effects" and len(parts) == 4 else None
-    if joint is None or joint not in spec.joint_names:
-        return param.unit
-    prismatic = bool(spec.tree.is_prismatic(spec.tree.index(spec.joint(joint).dof)))
-    referred = parts[0] == "effects" or parts[2] == "sensor" or len(parts) == 3
-    return joint_unit(param.unit, prismatic, referred)

@@ -696,12 +696,38 @@ def _estimated(spec: RobotSpec, table: Any, at: _Where) -> dict[str, tuple[float
             param, value = estimable(spec, key)
         except SpecError as exc:
             raise fail(exc.message) from None
+        unit = estimated_unit(spec, key)
         if lo < param.lower or hi > param.upper:
-            raise fail(f"[{lo:g}, {hi:g}] {param.unit} leaves the parameter's bounds [{param.lower:g}, {param.upper:g}] {param.unit}")
+            raise fail(f"[{lo:g}, {hi:g}] {unit} leaves the parameter's bounds [{param.lower:g}, {param.upper:g}] {unit}")
         if not lo <= value <= hi:
-            raise fail(f"the value {value:g} {param.unit} lies outside its estimated range [{lo:g}, {hi:g}] {param.unit}")
+            raise fail(f"the value {value:g} {unit} lies outside its estimated range [{lo:g}, {hi:g}] {unit}")
         out[key] = (lo, hi)
     return out
+
+
+# units declared for a revolute joint that read differently on a prismatic one (referred to the joint)
+_PRISMATIC = {"rad": "m", "rad/V": "m/V", "rad/s": "m/s", "N m": "N", "N m s/rad": "N s/m"}
+
+
+def joint_unit(unit: str, prismatic: bool, joint_referred: bool = True) -> str:
+    """A declared unit resolved to the joint's kind: 'N m or N' -> the first (revolute) or second
+    (prismatic); a revolute unit of a joint-referred parameter (sensor, initial position) -> its linear one."""
+    kinds = unit.split(" or ")
+    if len(kinds) == 2:
+        return kinds[1] if prismatic else kinds[0]
+    return _PRISMATIC.get(unit, unit) if prismatic and joint_referred else unit
+
+
+def estimated_unit(spec: RobotSpec, key: str) -> str:
+    """The unit of an estimable parameter path as its joint reads it (m/V for a prismatic joint's sensor gain)."""
+    param, _ = estimable(spec, key)
+    parts = key.split(".")
+    joint = parts[1] if parts[0] == "joints" else parts[2] if parts[0] == "effects" and len(parts) == 4 else None
+    if joint is None or joint not in spec.joint_names:
+        return param.unit
+    prismatic = bool(spec.tree.is_prismatic(spec.tree.index(spec.joint(joint).dof)))
+    referred = parts[0] == "effects" or parts[2] == "sensor" or len(parts) == 3
+    return joint_unit(param.unit, prismatic, referred)
 
 
 def estimable(spec: RobotSpec, key: str) -> tuple[Parameter, float]:
