@@ -120,8 +120,8 @@ def causes(result: dict, spec) -> list[str]:
             sensor = spec.joint(j).components.get("sensor")
             fix = ""
             if sensor is not None:
-                fix = (f" (joints.{j}.sensor.A = {-float(sensor['A']):.6g}, its [estimated] range too) and read its "
-                       f"offset B again at a known position, then import the volts again")
+                fix = (f" (joints.{j}.sensor.A = {-float(sensor['A']):.6g}, and its [estimated] range) and read its "
+                       f"offset B again at a known position (moving B's range with it), then import the volts again")
             said += (f". The position mirrored explains it: the position sensor reads the other way round from "
                      f"the spec; reverse the sign of its gain{fix}")
         else:
