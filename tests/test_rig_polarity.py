@@ -41,16 +41,22 @@ def _diagnose(cli, root, j, rows, name, command_unit=""):
     return json.loads((root / f"{name}_rep" / "diagnosis.json").read_text()), proc.stdout
 
 
+def _reversal_named(d, j, named, other):
+    """The record moves against its command, the reversal ``named`` (a fit key) explains it by 20
+    points over the record as is and over the ``other`` reversal; returns the cause said."""
+    assert d["verdict"] == "unexplained_discrepancy"
+    e = d["unexplained"]["polarity"]["joints"][j]
+    assert e["reversed"] and e["record"]["correlation"] < 0 < e["model"]["correlation"]
+    assert e[named] > e["fit"] + 20 and e[named] > e[other] + 20
+    return d["unexplained"]["record_causes"][0]
+
+
 def test_a_valve_wired_the_other_way_is_named_and_reading_the_command_reversed_fixes_it(cli, rig_log):
     root, j, rows = rig_log
     swapped = rows.copy()
     swapped[:, 2] = -swapped[:, 2]
     d, printed = _diagnose(cli, root, j, swapped, "swapped")
-    assert d["verdict"] == "unexplained_discrepancy"
-    e = d["unexplained"]["polarity"]["joints"][j]
-    assert e["reversed"] and e["record"]["correlation"] < 0 < e["model"]["correlation"]
-    assert e["fit_command_reversed"] > e["fit"] + 20 and e["fit_command_reversed"] > e["fit_position_mirrored"] + 20
-    cause = d["unexplained"]["record_causes"][0]
+    cause = _reversal_named(d, j, "fit_command_reversed", "fit_position_mirrored")
     assert "command reversed explains it" in cause and f"u_{j}=SOURCE:*-1" in cause
     assert "in the record: " in printed and "command reversed explains it" in printed
     # the advice, followed: the same log read with the command reversed is clean
@@ -63,11 +69,7 @@ def test_a_sensor_reading_the_other_way_is_named_with_its_gain_reversed(cli, rig
     mirrored = rows.copy()
     mirrored[:, 1] = 9.6 - mirrored[:, 1]          # the reading falls as the load rises, 0.4 V short of the span
     d, _ = _diagnose(cli, root, j, mirrored, "mirrored")
-    assert d["verdict"] == "unexplained_discrepancy"
-    e = d["unexplained"]["polarity"]["joints"][j]
-    assert e["reversed"] and e["record"]["correlation"] < 0 < e["model"]["correlation"]
-    assert e["fit_position_mirrored"] > e["fit"] + 20 and e["fit_position_mirrored"] > e["fit_command_reversed"] + 20
-    cause = d["unexplained"]["record_causes"][0]
+    cause = _reversal_named(d, j, "fit_position_mirrored", "fit_command_reversed")
     a = load_robot(root / "rig").get(f"joints.{j}.sensor.A")
     assert "position mirrored explains it" in cause and f"joints.{j}.sensor.A = {-a:.6g}" in cause
 
