@@ -31,6 +31,8 @@ joint's speed per volt of command (regressed from the record).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .metrics import velocity
@@ -95,21 +97,33 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
     return best
 
 
+def direction(u: np.ndarray, y: np.ndarray, dt: float, command_range: tuple[float, float] | None = None) -> dict:
+    """Which way ``y`` moves per volt of command ``u``: the least-squares slope of its smoothed velocity
+    on the command (an offset allowed; m/s or rad/s per V) and their correlation, over samples whose
+    command is inside its range (at a limit the joint may sit in an end stop). Zeros where either is
+    constant or fewer than 10 samples are left."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    keep = unsaturated(u, command_range) & np.isfinite(y) & np.isfinite(u)
+    none = {"speed_per_volt": 0.0, "correlation": 0.0}
+    if keep.sum() < 10:
+        return none
+    v = velocity(np.where(np.isfinite(y), y, 0.0), dt)[keep]
+    uc = u[keep] - u[keep].mean()
+    vc = v - v.mean()
+    su, sv = float(uc @ uc), float(vc @ vc)
+    if su <= 0.0 or sv <= 0.0 or not math.isfinite(sv):
+        return none
+    return {"speed_per_volt": float(uc @ v) / su, "correlation": float(uc @ vc) / math.sqrt(su * sv)}
+
+
 def time_constant(u: np.ndarray, y: np.ndarray, dt: float, gain: float,
                   command_range: tuple[float, float] | None = None) -> float | None:
     """Time constant (s) of the position loop ``u = K (r - y)`` around a joint whose speed is about
-    ``G u``: ``1 / (K G)``, ``G`` the least-squares slope of the record's smoothed velocity on its
-    command (an offset allowed) where the command is inside its range. None where that is not positive."""
-    u, y = np.asarray(u, float), np.asarray(y, float)
-    v = velocity(y, dt)
-    keep = unsaturated(u, command_range)
-    if keep.sum() < 10 or gain <= 0:
+    ``G u``: ``1 / (K G)``, ``G`` the record's speed per volt (:func:`direction`). None where that is
+    not positive."""
+    if gain <= 0:
         return None
-    uc = u[keep] - u[keep].mean()
-    den = float(uc @ uc)
-    if den <= 0:
-        return None
-    g = float(uc @ v[keep]) / den
+    g = direction(u, y, dt, command_range)["speed_per_volt"]
     return 1.0 / (gain * g) if g > 0 else None
 
 

@@ -13,9 +13,9 @@ record stays unexplained; this check says why and tries the two fixes, each by a
   the joint stands sets its gravity load and end stops). Only the fit is reported: on a vertical
   cylinder the load is the same at every stroke, and the record fixes ``c`` (so ``B``) only loosely.
 
-Evidence per joint: the least-squares slope of the smoothed velocity on the command (m/s or rad/s
-per volt) and their correlation where the command is inside its range, for the record and for the
-baseline model driven by the same command. A hydraulic valve meters flow, so the speed follows the
+Evidence per joint: which way it moves per volt of command (``closed_loop.direction``: the slope
+of the smoothed velocity on the command and their correlation, where the command is inside its
+range), for the record and for the baseline model driven by the same command. A hydraulic valve meters flow, so the speed follows the
 command closely (correlations of 0.95 or more on the templates' closed-loop records and on the
 built-in robots' open-loop ones); a reversal is flagged where the two correlations have opposite
 signs and each reaches ``CORRELATION_MIN``.
@@ -28,30 +28,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from .closed_loop import unsaturated
+from .closed_loop import direction
 from .metrics import nrmse_fit, velocity
 from .record import Record
 
 CORRELATION_MIN = 0.5     # |correlation| of command and speed each side must reach for a reversal
 MIRROR_GRID = 9           # mirror points c tried across their feasible interval, then refined
 MIRROR_REFINE = 8         # golden-section steps around the best grid point
-
-
-def direction(u: np.ndarray, y: np.ndarray, dt: float, command_range: tuple[float, float] | None = None) -> dict:
-    """Slope of the smoothed velocity of ``y`` on the command ``u`` (per volt; an offset allowed) and
-    their correlation, over samples whose command is inside its range. Zeros where either is constant."""
-    u, y = np.asarray(u, float), np.asarray(y, float)
-    keep = unsaturated(u, command_range) & np.isfinite(y) & np.isfinite(u)
-    none = {"speed_per_volt": 0.0, "correlation": 0.0}
-    if keep.sum() < 10:
-        return none
-    v = velocity(np.where(np.isfinite(y), y, 0.0), dt)[keep]
-    uc = u[keep] - u[keep].mean()
-    vc = v - v.mean()
-    su, sv = float(uc @ uc), float(vc @ vc)
-    if su <= 0.0 or sv <= 0.0 or not math.isfinite(sv):
-        return none
-    return {"speed_per_volt": float(uc @ vc) / su, "correlation": float(uc @ vc) / math.sqrt(su * sv)}
 
 
 def reversed_sign(record: dict, model: dict) -> bool:
@@ -147,8 +130,9 @@ def _better(e: dict) -> str | None:
 
 def _best_mirror(spec, rec: Record, runner, j: str, n: int, start: int) -> float:
     """The best fit (points) of the model to the record mirrored, ``c - q``, over the mirror point ``c``
-    (position units; where the joint stands may fix it only loosely, so it is not reported). ``c`` keeps the mirrored record inside the joint's range; a joint without limits is
-    searched one recorded span either side of mirroring in place."""
+    (position units; where the joint stands may fix it only loosely, so it is not reported). ``c``
+    keeps the mirrored record inside the joint's range; a joint without limits is searched one
+    recorded span either side of mirroring in place."""
     q = rec.angles[j][:n]
     q = q[np.isfinite(q)]
     if q.size == 0:
