@@ -14,7 +14,7 @@ hidden effect as its runner-up is counted apart (the report then says what would
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
-        [--flow 1.2] [--supply 0.85] [--log-every 1] [--json FILE]
+        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -55,10 +55,11 @@ def cli(*args) -> None:
         raise RuntimeError(f"hydrohil {' '.join(map(str, args[:2]))} failed: {p.stderr.strip()[-800:]}")
 
 
-def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1) -> dict:
+def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
+             rig_set: tuple[str, ...] = ()) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    cli("rig", "new", template, "--out", work / "rig")
+    cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
     spec = load_robot(work / "rig")
     joint = spec.joint_names[0]
     i = spec.tree.index(spec.joint(joint).dof)
@@ -102,6 +103,8 @@ def main():
     ap.add_argument("--supply", type=float, default=0.85, help="the rig's supply pressure against its spec (factor)")
     ap.add_argument("--log-every", type=int, default=1, metavar="M",
                     help="the rig's controller runs at M x the log's 50 Hz and the log keeps every M-th sample")
+    ap.add_argument("--rig-set", action="append", default=[], metavar="KNOB=VALUE",
+                    help="passed to 'rig new --set' (e.g. incline_deg=-90: a load hanging below the cylinder)")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
@@ -111,7 +114,7 @@ def main():
             for effect in args.effects.split(","):
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
-                                 args.log_every)
+                                 args.log_every, tuple(args.rig_set))
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -125,7 +128,8 @@ def main():
                 print(f"{template:9s} {effect:17s} seed {seed}: {'RIGHT' if c['right'] else 'wrong'}  {c['verdict']}: "
                       f"{named}{amb}{err}; fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     print(f"\nrig off nominal: valve flow x{args.flow:g}, supply x{args.supply:g}"
-          + (f"; controller at {args.log_every} x the log's rate" if args.log_every > 1 else "") + "; right = named alone within "
+          + (f"; controller at {args.log_every} x the log's rate" if args.log_every > 1 else "")
+          + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "") + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):
         sel = [c for c in cases if c["effect"] == effect]

@@ -15,7 +15,10 @@ def register(sub):
                     "going backwards is an error) and converter saturation, and write the dataset (.csv or .parquet) "
                     "with OUT" + SIDECAR_SUFFIX + " beside it: the summary and notes printed here, as JSON.",
     )
-    p.add_argument("raw", metavar="RAW", help="the log file")
+    p.add_argument("raw", metavar="RAW", nargs="+",
+                   help="the log file; several files are one record side by side (a logger that writes one channel "
+                        "per file): row k of each is the same sample, and a later file's columns are numbered on from "
+                        "the earlier files' (with a 1-column a.txt and b.txt, b.txt's column 0 is column 1)")
     p.add_argument("--robot", required=True, help="built-in robot name, a directory holding robot.toml, or a robot.toml")
     p.add_argument("--out", required=True, metavar="DATASET.csv", help="dataset to write (.csv or .parquet)")
     p.add_argument("--json", action="store_true", help="print the import report as JSON instead of text")

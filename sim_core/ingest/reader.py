@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -55,11 +56,13 @@ class ImportResult:
     notes: list[str] = field(default_factory=list)
     valid: dict[str, np.ndarray] = field(default_factory=dict)   # measured column -> False where saturated
     options: ReadOptions | None = None
+    files: list[str] = field(default_factory=list)      # the file(s) read, side by side
 
     def to_dict(self) -> dict:
         """The JSON sidecar: which column was what, the time grid and the notes."""
         return {
-            "source": self.source, "robot": self.robot, "rows": len(self.dataset),
+            "source": self.source, "files": list(self.files) or [self.source], "robot": self.robot,
+            "rows": len(self.dataset),
             "rate_hz": self.grid.rate_hz, "duration_s": self.grid.duration_s,
             "time_grid": self.grid.to_dict(),
             "columns": {c.name: c.to_dict() for c in self.columns},
@@ -110,10 +113,17 @@ def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> Im
     return ImportResult(str(path), spec.name, ds, reports, grid, notes, {}, options)
 
 
-def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
+def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOptions) -> ImportResult:
     """Read a log file (delimited text or Parquet) as a dataset of ``spec``. Errors
-    (:class:`DatasetError`) name the file, the column and the row."""
-    path = Path(path)
+    (:class:`DatasetError`) name the file, the column and the row.
+
+    ``path`` may be several files holding one record side by side (loggers that write one channel
+    per file): row k of each is the same sample, and their columns are numbered on from the first
+    file's (a second file's column 0 is column ``n`` when the first has ``n``)."""
+    paths = [Path(p) for p in ([path] if isinstance(path, (str, Path)) else path)]
+    if not paths:
+        raise DatasetError("no log file given")
+    path = paths[0] if len(paths) == 1 else Path(" + ".join(map(str, paths)))
     where = f"{path}: "
     maps = [parse_column(c) for c in options.columns]
     seen: dict[str, str] = {}
@@ -124,7 +134,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
         seen[m.name] = m.text
     if options.rate is not None and not (np.isfinite(options.rate) and options.rate > 0):
         raise DatasetError(f"--rate {options.rate:g}: must be a positive number of samples per second (Hz)")
-    source = _open_source(path, options)
+    source = _open_source(paths[0], options) if len(paths) == 1 else _JoinedSource(paths, options)
     notes = source.notes          # the source adds to it while reading (a cut last line)
     maps = maps + source.implicit_maps(maps, spec, notes)
     if not maps:
@@ -141,14 +151,14 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
         raise DatasetError(f"{where}no time column: map one with --column time=SOURCE[:s|ms], or give the sample rate "
                            f"with --rate HZ")
     units = [_unit(m, spec, source) for m in maps]
-    raw, place = source.read([m.source for m in maps], [f"{m.name} ({m.source_label})" for m in maps])
+    raw, place = source.read([m.source for m in maps], [f"{m.name} ({source.label(m)})" for m in maps])
     rows = raw.shape[0]
 
     # time grid first: it decides which rows stay
     if has_time:
         k = next(i for i, m in enumerate(maps) if m.name == "time")
         t = units[k].convert(raw[:, k])
-        grid, keep = check_grid(t, where=where, label=f"time ({maps[k].source_label})", place=place)
+        grid, keep = check_grid(t, where=where, label=f"time ({source.label(maps[k])})", place=place)
         t = t[keep] - t[keep][0]
     else:
         if rows < 2:
@@ -162,7 +172,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
     valid: dict[str, np.ndarray] = {}
     for i, (m, u) in enumerate(zip(maps, units)):
         if m.name == "time":
-            reports.append(ColumnReport("time", m.source_label, u, 0.0, float(t[-1])))
+            reports.append(ColumnReport("time", source.label(m), u, 0.0, float(t[-1])))
             continue
         kind, joint = column_kind(m.name, spec)
         sat = find_saturation(raw[:, i], u)
@@ -170,23 +180,23 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
         if sat is not None:
             s, mask = sat
             report_sat = s
-            notes.append(_saturation_note(m, s, u, kind, options))
+            notes.append(_saturation_note(m, source.label(m), s, u, kind))
             if kind in MEASURED_KINDS:
                 if options.saturation == "fail":
                     r = s.first_row
-                    raise DatasetError(f"{where}column {m.name} ({m.source_label}): {place(r)}: "
+                    raise DatasetError(f"{where}column {m.name} ({source.label(m)}): {place(r)}: "
                                        f"{raw[r - 1, i]:g} is at the converter's full scale ({s.converter}); "
                                        f"{s.samples} sample(s) in {s.runs} run(s) (--saturation fail)")
                 valid[m.name] = ~mask[keep]
         v = u.convert(raw[:, i])
         if kind == "command":
-            check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({m.source_label})", place=place,
+            check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({source.label(m)})", place=place,
                                 hint=f"; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)")
         if kind in ("angle", "position") and joint is not None:
             _note_outside_range(v, m, u, spec, joint, notes)
         v = v[keep]
         columns[m.name] = v
-        reports.append(ColumnReport(m.name, m.source_label, u, float(v.min()), float(v.max()), report_sat))
+        reports.append(ColumnReport(m.name, source.label(m), u, float(v.min()), float(v.max()), report_sat))
     order = dataset_order(columns, spec)
     ds = Dataset(order, np.column_stack([columns[c] for c in order]),
                  {r.name: r.unit.si for r in reports}, spec.name)
@@ -194,7 +204,7 @@ def import_record(path: str | Path, spec, options: ReadOptions) -> ImportResult:
     if not has_time:
         reports.insert(0, ColumnReport("time", f"--rate {options.rate:g} Hz", parse_unit(None, "time", column="time"),
                                        0.0, float(t[-1])))
-    return ImportResult(str(path), spec.name, ds, reports, grid, notes, valid, options)
+    return ImportResult(str(path), spec.name, ds, reports, grid, notes, valid, options, [str(p) for p in paths])
 
 
 def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
@@ -226,9 +236,9 @@ def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[
                      f"calibration")
 
 
-def _saturation_note(m: ColumnMap, s: Saturation, u: Unit, kind: str, options: ReadOptions) -> str:
+def _saturation_note(m: ColumnMap, label: str, s: Saturation, u: Unit, kind: str) -> str:
     runs = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in s.rows[:5]) + (", ..." if s.runs > 5 else "")
-    head = (f"{m.name} ({m.source_label}): {s.samples} sample(s) at the converter's full scale "
+    head = (f"{m.name} ({label}): {s.samples} sample(s) at the converter's full scale "
             f"({s.converter}: {s.full_scale[0]:g} / {s.full_scale[1]:g}), {s.runs} run(s), the longest "
             f"{s.longest_run} sample(s) (rows {runs})")
     if kind == "command":
@@ -264,13 +274,21 @@ class _Source:
             except ValueError:
                 continue
             out.append(ColumnMap(n, n, self.unit_of(n), f"{n}={n}"))
-        ignored = [n for i, n in enumerate(self.names) if i not in used and n not in {m.name for m in out}
+        ignored = [n for i, n in enumerate(self.names) if n and i not in used and n not in {m.name for m in out}
                    and n not in targets]
         if ignored and maps + out:
             notes.append(f"file columns not read: {', '.join(ignored[:12])}" + (", ..." if len(ignored) > 12 else ""))
         return out
 
     def unit_of(self, name: str) -> str | None:
+        return None
+
+    def label(self, m: ColumnMap) -> str:
+        """Where column ``m`` comes from, for reports and messages ("column 3", "header 'pos'")."""
+        return m.source_label
+
+    def line(self, row: int) -> int | None:
+        """The file line of data row ``row`` (from 1), where the file has lines; after :meth:`read`."""
         return None
 
     def resolve(self, m: ColumnMap) -> int:
@@ -303,8 +321,11 @@ class _TextSource(_Source):
 
     def read(self, sources, labels):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        cols = read_columns(self.layout, idx, labels, cut_last_line=True)
-        return cols.data, lambda r: f"row {r} (line {cols.line(r)})"
+        self._cols = read_columns(self.layout, idx, labels, cut_last_line=True)
+        return self._cols.data, lambda r: f"row {r} (line {self.line(r)})"
+
+    def line(self, row: int) -> int:
+        return self._cols.line(row)
 
 
 class _ParquetSource(_Source):
@@ -326,6 +347,88 @@ class _ParquetSource(_Source):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
         data = self.table.columns([self.names[i] for i in idx])
         return data, (lambda r: f"row {r}")
+
+
+class _JoinedSource(_Source):
+    """Several files read side by side: row k of each is one sample; columns numbered on across files.
+    A file without a header row contributes blank names (``names`` is None only when none has one)."""
+
+    def __init__(self, paths: list[Path], options: ReadOptions):
+        self.parts = [_open_source(p, options) for p in paths]
+        self.path = Path(" + ".join(map(str, paths)))
+        self.first = [0]                                  # global index of each part's column 0
+        for part in self.parts:
+            self.first.append(self.first[-1] + part.n_fields)
+        self.n_fields = self.first[-1]
+        named = any(part.names is not None for part in self.parts)
+        self.names = [n for part in self.parts for n in (part.names or [""] * part.n_fields)] if named else None
+        self._seen = [0] * len(self.parts)                # part notes already taken over
+        self.notes = []
+        self._take_notes()
+
+    def _take_notes(self) -> None:
+        for k, part in enumerate(self.parts):
+            self.notes += [f"{part.path}: {n}" for n in part.notes[self._seen[k]:]]
+            self._seen[k] = len(part.notes)
+
+    def _part(self, index: int) -> tuple[int, int]:
+        """(part, its own column index) of global column ``index``."""
+        k = next(k for k in range(len(self.parts)) if index < self.first[k + 1])
+        return k, index - self.first[k]
+
+    def resolve(self, m: ColumnMap) -> int:
+        if isinstance(m.source, str) and self.names is not None:
+            hits = [i for i, n in enumerate(self.names) if n == m.source]
+            if len(hits) > 1:
+                files = ", ".join(str(self.parts[self._part(i)[0]].path) for i in hits)
+                raise DatasetError(f"{self.path}: --column {m.text!r}: header {m.source!r} is in more than one file "
+                                   f"({files}); refer to the column by its index ({', '.join(map(str, hits))})")
+        if isinstance(m.source, int) and m.source >= self.n_fields:
+            each = ", ".join(f"{part.path} {part.n_fields}" for part in self.parts)
+            raise DatasetError(f"{self.path}: --column {m.text!r}: column index {m.source} is out of range: the files "
+                               f"have {self.n_fields} column(s) together ({each}), numbered 0..{self.n_fields - 1} "
+                               f"in the order given")
+        return super().resolve(m)
+
+    def label(self, m: ColumnMap) -> str:
+        k, own = self._part(self.resolve(m))
+        where = self.parts[k].path
+        return f"header {m.source!r} in {where}" if isinstance(m.source, str) else f"column {m.source}: {where}'s column {own}"
+
+    def unit_of(self, name: str) -> str | None:
+        k, _ = self._part(self.names.index(name))
+        return self.parts[k].unit_of(name)
+
+    def read(self, sources, labels):
+        idx = [self.resolve(ColumnMap("", s, None, lab)) for s, lab in zip(sources, labels)]
+        wanted: dict[int, list[int]] = {}                 # part -> positions in ``sources``
+        for pos, i in enumerate(idx):
+            wanted.setdefault(self._part(i)[0], []).append(pos)
+        out: list[np.ndarray | None] = [None] * len(idx)
+        rows = {}
+        for k, positions in sorted(wanted.items()):
+            data, _ = self.parts[k].read([idx[p] - self.first[k] for p in positions], [labels[p] for p in positions])
+            rows[k] = data.shape[0]
+            for j, p in enumerate(positions):
+                out[p] = data[:, j]
+        self._take_notes()
+        unread = [str(self.parts[k].path) for k in range(len(self.parts)) if k not in wanted]
+        if unread:
+            self.notes.append(f"no column read from {', '.join(unread)}")
+        if len(set(rows.values())) > 1:
+            counts = ", ".join(f"{self.parts[k].path} {n}" for k, n in rows.items())
+            raise DatasetError(f"{self.path}: files read side by side hold one sample per row each, but their rows "
+                               f"differ ({counts}): cut them to the same samples")
+        keys = sorted(wanted)
+
+        def place(r: int) -> str:
+            lines = [(self.parts[k].path, self.parts[k].line(r)) for k in keys if self.parts[k].line(r) is not None]
+            if not lines:
+                return f"row {r}"
+            if len({ln for _, ln in lines}) == 1:
+                return f"row {r} (line {lines[0][1]})"
+            return f"row {r} (" + ", ".join(f"line {ln} of {path}" for path, ln in lines) + ")"
+        return np.column_stack(out), place
 
 
 def _open_source(path: Path, options: ReadOptions) -> _Source:
