@@ -11,7 +11,8 @@ import pytest
 from sim_core.dataset import Dataset
 from sim_core.excitation import multilevel_prbs
 from sim_core.identification import output_error as oe
-from sim_core.identification.calibration import IDENTIFIED_RATIO, calibrate, identifiability, mark_conditional, plan
+from sim_core.identification.calibration import (IDENTIFIED_RATIO, at_bound, calibrate, identifiability, mark_conditional,
+                                                 plan)
 from sim_core.identification.parameters import FreeParameter
 from sim_core.identification.record import first_reading, record_from_dataset, start_position
 from sim_core.identification.simulation import Runner, choose_numerics, model_spec
@@ -100,7 +101,7 @@ def test_estimated_reads_nothing_from_a_spec_without_the_table():
 # ---- identifiability ----------------------------------------------------------------------------
 
 def _result(values, sigma, corr=None):
-    free = [FreeParameter(k, 1e-9, 1e9) for k in values]
+    free = [FreeParameter(k, 1e-9, 1e9, log=True) for k in values]      # far from either end
     return oe.FitResult(free, dict(values), 0.0, sigma=dict(sigma), correlation=None if corr is None else np.array(corr))
 
 
@@ -126,6 +127,24 @@ def test_identifiability_rule():
         assert v[mass] is None and f"with {mass}" in v[ps]
     rows = mark_conditional([{"parameter": mass}, {"parameter": ps, "not_identified_because": v[ps]}])
     assert rows[0]["conditional_on"] == [ps] and "conditional_on" not in rows[1]
+
+
+def test_a_parameter_stopped_at_its_ranges_end_is_not_identified():
+    """A fit that stops on a bound reports a sigma from the local slope only: the record asked for a
+    value beyond the range (some misfit the parameter absorbs, as far as it may), so it is not
+    measured. Just inside the end it is judged by |value/sigma| as any other."""
+    mass, ps = "effects.payload.lift.mass", "supply.pressure"
+    free = [FreeParameter(mass, 50.0, 205.0), FreeParameter(ps, 9.8e6, 1.61e7, log=True)]
+
+    def judged(m, p):
+        return identifiability(oe.FitResult(free, {mass: m, ps: p}, 0.0, sigma={mass: 1.0, ps: 1e4}))
+
+    v = judged(50.0, 1.2e7)
+    assert "at the lower end" in v[mass] and v[ps] is None
+    v = judged(120.0, 1.61e7)
+    assert v[mass] is None and "at the upper end" in v[ps]
+    assert judged(50.0 + 0.01 * 155.0, 1.6e7) == {mass: None, ps: None}
+    assert at_bound(FreeParameter(mass, -math.inf, math.inf), 1e9) is None
 
 
 def test_calibration_measures_what_the_record_identifies_and_keeps_the_rest_nominal(off_nominal):

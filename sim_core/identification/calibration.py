@@ -305,12 +305,14 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     keep, current = list(free), res
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
     cal_spec = res.spec
+    bound_only = False          # after the first drop only a parameter pushed to its range's end goes
     while keep:
         verdict = identifiability(current)
-        failing = [fp for fp in keep if verdict[fp.key] is not None]
+        failing = [fp for fp in keep if verdict[fp.key] is not None
+                   and (not bound_only or verdict[fp.key].startswith("at the"))]
         if not failing:
             break
-        every = len(failing) == len(keep)
+        every = not bound_only and len(failing) == len(keep)
         if every:
             failing = [min(failing, key=lambda fp: _strength(current, fp.key, verdict[fp.key]))]
         for fp in failing:
@@ -325,7 +327,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
         else:
             cal_spec = reset
         if not every:
-            break
+            bound_only = True
     final = current
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
@@ -337,10 +339,24 @@ def _strength(res: oe.FitResult, key: str, reason: str) -> tuple[int, float]:
     """How well ``res`` pins ``key`` down: a parameter flagged for its correlation with another is
     weaker than any judged by its own |value/sigma| (lowest first; of the correlated, the one
     ranked later in KEEP_ORDER)."""
+    if reason.startswith("at the"):
+        return (-1, 0.0)
     if reason.startswith("correlation"):
         return (0, -float(keep_rank(key)))
     v, s = res.values.get(key, 0.0), res.sigma.get(key, math.inf)
     return (1, abs(v) / s if s > 0 and math.isfinite(s) else 0.0)
+
+
+BOUND_SHARE = 1e-3          # within this share of its range (in fit coordinates) of an end, a parameter is at it
+
+
+def at_bound(fp: FreeParameter, value: float) -> str | None:
+    """'lower' or 'upper' when ``value`` sits at that end of ``fp``'s range (where the fit stopped on the
+    bound: the sigma of the local Jacobian then says nothing), else None."""
+    if not (math.isfinite(fp.lower) and math.isfinite(fp.upper)) or fp.upper <= fp.lower:
+        return None
+    x = fp.to_x(value)
+    return "lower" if x <= BOUND_SHARE else "upper" if x >= 1.0 - BOUND_SHARE else None
 
 
 def identifiability(res: oe.FitResult) -> dict[str, str | None]:
@@ -348,10 +364,15 @@ def identifiability(res: oe.FitResult) -> dict[str, str | None]:
     beyond CORRELATION_LIMIT with another freed parameter; of a correlated pair the flow gain stays)."""
     out: dict[str, str | None] = {}
     keys = [fp.key for fp in res.free]
-    for k in keys:
+    for fp in res.free:
+        k = fp.key
         v, s = res.values[k], res.sigma.get(k, math.inf)
         ratio = abs(v) / s if s > 0 and math.isfinite(s) else (math.inf if s == 0 else 0.0)
         out[k] = None if ratio >= IDENTIFIED_RATIO else f"|value/sigma| = {ratio:.2g} < {IDENTIFIED_RATIO:g}"
+        edge = at_bound(fp, v)
+        if edge and out[k] is None:
+            out[k] = (f"at the {edge} end of its range [{fp.lower:.4g}, {fp.upper:.4g}]: the record asks for a value "
+                      f"beyond it, a misfit that is not this parameter's to absorb")
     C = res.correlation
     if C is not None:
         order = sorted(range(len(keys)), key=lambda i: -keep_rank(keys[i]))
