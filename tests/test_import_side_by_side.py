@@ -108,6 +108,9 @@ def test_header_names_across_files(tmp_path):
     files = [tmp_path / "a.csv", tmp_path / "b.csv"]
     with pytest.raises(DatasetError, match=r"header 'value' is in more than one file .*by its index \(1, 2\)"):
         import_record(files, spec, ReadOptions(columns=("time=t_ms:ms", "q_j2=value")))
+    with pytest.raises(DatasetError, match=r"no column 'pos' in the files' headers \(.*a.csv: t_ms, value; .*b.csv: "
+                                           r"value, u_j2\)"):
+        import_record(files, spec, ReadOptions(columns=("time=t_ms:ms", "q_j2=pos")))
     res = import_record(files, spec, ReadOptions(columns=("time=t_ms:ms", "q_j2=2")))
     np.testing.assert_allclose(res.dataset["q_j2"], 0.2)
     np.testing.assert_allclose(res.dataset["u_j2"], 1.5)      # a header named like a dataset column, in b.csv

@@ -383,6 +383,12 @@ class _JoinedSource(_Source):
                 files = ", ".join(str(self.parts[self._part(i)[0]].path) for i in hits)
                 raise DatasetError(f"{self.path}: --column {m.text!r}: header {m.source!r} is in more than one file "
                                    f"({files}); refer to the column by its index ({', '.join(map(str, hits))})")
+        if isinstance(m.source, str) and m.source not in (self.names or []):
+            headers = "; ".join(f"{part.path}: {', '.join(part.names)}" if part.names else f"{part.path}: no header row"
+                                for part in self.parts)
+            raise DatasetError(f"{self.path}: --column {m.text!r}: no column {m.source!r} in the files' headers "
+                               f"({headers}); a file without a header is read by 0-based index, numbered on across "
+                               f"the files")
         if isinstance(m.source, int) and m.source >= self.n_fields:
             each = ", ".join(f"{part.path} {part.n_fields}" for part in self.parts)
             raise DatasetError(f"{self.path}: --column {m.text!r}: column index {m.source} is out of range: the files "
