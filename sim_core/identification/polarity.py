@@ -29,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from .closed_loop import direction
-from .metrics import nrmse_fit, velocity
+from .metrics import nrmse_fit
 from .record import Record
 
 CORRELATION_MIN = 0.5     # |correlation| of command and speed each side must reach for a reversal
@@ -87,7 +87,7 @@ def causes(result: dict, spec) -> list[str]:
     for j, e in (result or {}).get("joints", {}).items():
         if not e["reversed"]:
             continue
-        unit = "m" if spec.tree.is_prismatic(spec.tree.index(spec.joint(j).dof)) else "rad"
+        unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
         said = (f"on {j} the recorded position moves against the command where the model's moves with it (record "
                 f"{e['record']['speed_per_volt']:+.3g} {unit}/s per V of command, correlation "
                 f"{e['record']['correlation']:+.2f}; model {e['model']['speed_per_volt']:+.3g} {unit}/s per V, "

@@ -123,8 +123,6 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
     paths = [Path(p) for p in ([path] if isinstance(path, (str, Path)) else path)]
     if not paths:
         raise DatasetError("no log file given")
-    path = paths[0] if len(paths) == 1 else Path(" + ".join(map(str, paths)))
-    where = f"{path}: "
     maps = [parse_column(c) for c in options.columns]
     seen: dict[str, str] = {}
     for m in maps:
@@ -135,6 +133,8 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
     if options.rate is not None and not (np.isfinite(options.rate) and options.rate > 0):
         raise DatasetError(f"--rate {options.rate:g}: must be a positive number of samples per second (Hz)")
     source = _open_source(paths[0], options) if len(paths) == 1 else _JoinedSource(paths, options)
+    path = source.path            # several files: "a.txt + b.txt"
+    where = f"{path}: "
     notes = source.notes          # the source adds to it while reading (a cut last line)
     maps = maps + source.implicit_maps(maps, spec, notes)
     if not maps:
@@ -151,14 +151,15 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
         raise DatasetError(f"{where}no time column: map one with --column time=SOURCE[:s|ms], or give the sample rate "
                            f"with --rate HZ")
     units = [_unit(m, spec, source) for m in maps]
-    raw, place = source.read([m.source for m in maps], [f"{m.name} ({source.label(m)})" for m in maps])
+    labels = [source.label(m) for m in maps]          # where each column comes from
+    raw, place = source.read([m.source for m in maps], [f"{m.name} ({lab})" for m, lab in zip(maps, labels)])
     rows = raw.shape[0]
 
     # time grid first: it decides which rows stay
     if has_time:
         k = next(i for i, m in enumerate(maps) if m.name == "time")
         t = units[k].convert(raw[:, k])
-        grid, keep = check_grid(t, where=where, label=f"time ({source.label(maps[k])})", place=place)
+        grid, keep = check_grid(t, where=where, label=f"time ({labels[k]})", place=place)
         t = t[keep] - t[keep][0]
     else:
         if rows < 2:
@@ -172,7 +173,7 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
     valid: dict[str, np.ndarray] = {}
     for i, (m, u) in enumerate(zip(maps, units)):
         if m.name == "time":
-            reports.append(ColumnReport("time", source.label(m), u, 0.0, float(t[-1])))
+            reports.append(ColumnReport("time", labels[i], u, 0.0, float(t[-1])))
             continue
         kind, joint = column_kind(m.name, spec)
         sat = find_saturation(raw[:, i], u)
@@ -180,23 +181,23 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
         if sat is not None:
             s, mask = sat
             report_sat = s
-            notes.append(_saturation_note(m, source.label(m), s, u, kind))
+            notes.append(_saturation_note(m, labels[i], s, u, kind))
             if kind in MEASURED_KINDS:
                 if options.saturation == "fail":
                     r = s.first_row
-                    raise DatasetError(f"{where}column {m.name} ({source.label(m)}): {place(r)}: "
+                    raise DatasetError(f"{where}column {m.name} ({labels[i]}): {place(r)}: "
                                        f"{raw[r - 1, i]:g} is at the converter's full scale ({s.converter}); "
                                        f"{s.samples} sample(s) in {s.runs} run(s) (--saturation fail)")
                 valid[m.name] = ~mask[keep]
         v = u.convert(raw[:, i])
         if kind == "command":
-            check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({source.label(m)})", place=place,
+            check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({labels[i]})", place=place,
                                 hint=f"; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)")
         if kind in ("angle", "position") and joint is not None:
             _note_outside_range(v, m, u, spec, joint, notes)
         v = v[keep]
         columns[m.name] = v
-        reports.append(ColumnReport(m.name, source.label(m), u, float(v.min()), float(v.max()), report_sat))
+        reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat))
     order = dataset_order(columns, spec)
     ds = Dataset(order, np.column_stack([columns[c] for c in order]),
                  {r.name: r.unit.si for r in reports}, spec.name)

@@ -725,7 +725,7 @@ def estimated_unit(spec: RobotSpec, key: str) -> str:
     joint = parts[1] if parts[0] == "joints" else parts[2] if parts[0] == "effects" and len(parts) == 4 else None
     if joint is None or joint not in spec.joint_names:
         return param.unit
-    prismatic = bool(spec.tree.is_prismatic(spec.tree.index(spec.joint(joint).dof)))
+    prismatic = spec.tree.is_prismatic(spec.joint(joint).dof)
     referred = parts[0] == "effects" or parts[2] == "sensor" or len(parts) == 3
     return joint_unit(param.unit, prismatic, referred)
 
