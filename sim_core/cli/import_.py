@@ -12,7 +12,7 @@ def register(sub):
         help="read a log file (any delimited text or Parquet) into a dataset CSV/Parquet for a robot",
         description="Map the columns of a log file onto the dataset columns of a robot (--column NAME=SOURCE[:UNIT]), "
                     "convert them to SI, check the time grid (jitter, gaps and repeated timestamps are reported, time "
-                    "going backwards is an error) and converter saturation, and write the dataset (.csv or .parquet) "
+                    "going backwards is an error), converter saturation and glitches of a position (repaired), and write the dataset (.csv or .parquet) "
                     "with OUT" + SIDECAR_SUFFIX + " beside it: the summary and notes printed here, as JSON.",
     )
     p.add_argument("raw", metavar="RAW", nargs="+",

@@ -1,5 +1,5 @@
 """Reading measured records: any delimited text or Parquet log file, mapped onto the dataset columns of
-a robot, converted to SI and checked (time grid, converter saturation, command range).
+a robot, converted to SI and checked (time grid, converter saturation, position glitches, command range).
 
     text.py        delimited text tables (fast path, and a slow path naming the bad cell)
     parquet.py     datasets as Parquet (units and robot in the schema metadata)
@@ -7,6 +7,7 @@ a robot, converted to SI and checked (time grid, converter saturation, command r
     units.py       units and their conversion to SI (incl. sensor volts, raw counts)
     timegrid.py    jitter, gaps, repeated timestamps, time going backwards
     saturation.py  samples at a converter's full scale
+    glitches.py    1-3 sample excursions of a position faster than the joint moves (repaired)
     options.py     the reading options, one definition for every command
     reader.py      import_record / read_input: all of the above for one file
 """

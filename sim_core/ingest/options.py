@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 SATURATION_POLICIES = ("mask", "fail")
+GLITCH_POLICIES = ("repair", "keep", "fail")
 
 
 @dataclass(frozen=True)
@@ -17,10 +18,12 @@ class ReadOptions:
     rate: float | None = None         # Hz, when the file has no time column
     skip_rows: int = 0                # lines before the header (or the data)
     saturation: str = "mask"          # converter saturation on a measured column: mask or fail
+    glitches: str = "repair"          # 1-3 sample excursions of a position (ingest/glitches.py): repair, keep or fail
 
     @property
     def given(self) -> bool:
-        """Whether any option asks for more than reading a dataset file as it is."""
+        """Whether any option asks for more than reading a dataset file as it is (``glitches`` applies to a
+        dataset file too)."""
         return bool(self.columns or self.no_header or self.delimiter is not None or self.rate is not None
                     or self.skip_rows or self.saturation != "mask")
 
@@ -51,6 +54,10 @@ def add_reading_options(p) -> None:
     g.add_argument("--saturation", choices=SATURATION_POLICIES, default="mask",
                    help="measured samples at a converter's full scale: mask (keep, report and mark them; default) "
                         "or fail")
+    g.add_argument("--glitches", choices=GLITCH_POLICIES, default="repair",
+                   help="1-3 samples of a measured position that leave the signal and come back faster than the joint "
+                        "moves anywhere else in the record (a wiper lifting, a loose connector): repair (replace them by "
+                        "interpolation and say where; default), keep, or fail")
 
 
 def options_from_args(args) -> ReadOptions:
@@ -61,4 +68,5 @@ def options_from_args(args) -> ReadOptions:
         rate=getattr(args, "rate", None),
         skip_rows=int(getattr(args, "skip_rows", 0) or 0),
         saturation=getattr(args, "saturation", "mask"),
+        glitches=getattr(args, "glitches", "repair"),
     )

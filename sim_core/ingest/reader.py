@@ -15,6 +15,7 @@ import numpy as np
 
 from ..dataset import Dataset, DatasetError, check_command_range, check_time, read_dataset
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
+from .glitches import Glitches, find_glitches, repaired
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
@@ -23,6 +24,7 @@ from .timegrid import TimeGrid, check_grid, regular_grid
 from .units import Unit, parse_unit
 
 MEASURED_KINDS = ("angle", "position", "pressure")
+POSITION_KINDS = ("angle", "position")     # where a glitch is physically impossible (the joint's inertia)
 OUTSIDE_RANGE_MARGIN = 0.1      # rad (or m): further outside a joint's limits hints at a wrong unit
 
 
@@ -36,12 +38,14 @@ class ColumnReport:
     min: float
     max: float
     saturation: Saturation | None = None
+    glitches: Glitches | None = None       # in the column's raw units
 
     def to_dict(self) -> dict:
         return {"source": self.source, "unit": self.unit.text, "si_unit": self.unit.si,
                 "conversion": {"scale": self.unit.scale, "offset": self.unit.offset, "text": self.unit.describe()},
                 "min": self.min, "max": self.max,
-                "saturation": self.saturation.to_dict() if self.saturation else None}
+                "saturation": self.saturation.to_dict() if self.saturation else None,
+                "glitches": self.glitches.to_dict() if self.glitches else None}
 
 
 @dataclass
@@ -78,6 +82,7 @@ class ImportResult:
         w = max(len(c.name) for c in self.columns)
         for c in self.columns:
             sat = f"  SATURATED {c.saturation.samples} sample(s)" if c.saturation else ""
+            sat += f"  GLITCHES {c.glitches.samples} sample(s)" if c.glitches else ""
             out.append(f"  {c.name:<{w}} <- {c.source} ({c.unit.describe()}): {c.min:.6g} .. {c.max:.6g} {c.unit.si}{sat}")
         return out
 
@@ -102,14 +107,19 @@ def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> Im
     t = ds.time
     grid, _ = check_grid(t, where=where, label="'time'", place=lambda r: f"row {r} (line {r + 1})" if not is_parquet(path) else f"row {r}")
     reports = []
+    policy = options.glitches if options is not None else "repair"
     for c, name in enumerate(ds.columns):
-        col = ds.data[:, c]
         try:
             kind, _ = column_kind(name, spec)
         except ValueError:
             continue
-        reports.append(ColumnReport(name, f"header {name!r}", parse_unit(None, kind, column=name),
-                                    float(col.min()), float(col.max())))
+        unit = parse_unit(None, kind, column=name)
+        found = None
+        if kind in POSITION_KINDS:
+            ds.data[:, c], found = _glitch_check(ds.data[:, c], policy, where, f"column {name}", unit,
+                                                 lambda r: f"row {r}", notes)
+        col = ds.data[:, c]
+        reports.append(ColumnReport(name, f"header {name!r}", unit, float(col.min()), float(col.max()), None, found))
     return ImportResult(str(path), spec.name, ds, reports, grid, notes, {}, options)
 
 
@@ -176,6 +186,10 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
             reports.append(ColumnReport("time", labels[i], u, 0.0, float(t[-1])))
             continue
         kind, joint = column_kind(m.name, spec)
+        found = None
+        if kind in POSITION_KINDS:       # before saturation: a dropout to full scale is a glitch
+            raw[:, i], found = _glitch_check(raw[:, i], options.glitches, where, f"column {m.name} ({labels[i]})", u,
+                                             place, notes)
         sat = find_saturation(raw[:, i], u)
         report_sat = None
         if sat is not None:
@@ -197,7 +211,7 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
             _note_outside_range(v, m, u, spec, joint, notes)
         v = v[keep]
         columns[m.name] = v
-        reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat))
+        reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found))
     order = dataset_order(columns, spec)
     ds = Dataset(order, np.column_stack([columns[c] for c in order]),
                  {r.name: r.unit.si for r in reports}, spec.name)
@@ -235,6 +249,30 @@ def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[
         notes.append(f"{m.name}: {100 * out.mean():.3g} % of the samples lie more than {OUTSIDE_RANGE_MARGIN:g} {u.si} "
                      f"outside the joint's range [{lo:.4g}, {hi:.4g}] {u.si}: check the unit ({u.text}) and the sensor "
                      f"calibration")
+
+
+def _glitch_check(raw: np.ndarray, policy: str, where: str, label: str, unit: Unit, place,
+                  notes: list[str]) -> tuple[np.ndarray, Glitches | None]:
+    """Find glitches in a measured position column (raw units); repair, keep or refuse them by ``policy``."""
+    if policy == "keep":
+        return raw, None
+    hit = find_glitches(raw)
+    if hit is None:
+        return raw, None
+    g, mask = hit
+    raw_unit = "V" if unit.sensor_range is not None else "counts" if unit.counts else unit.text
+    size = f"{abs(g.largest * unit.scale):.4g} {unit.si}" + (f" ({g.largest:.4g} {raw_unit})" if raw_unit != unit.si else "")
+    rows = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in g.rows[:8]) + (", ..." if g.runs > 8 else "")
+    what = f"{label}: {g.samples} sample(s) in {g.runs} glitch(es) of 1 to 3 samples (rows {rows}), up to {size} off " \
+           f"the samples either side" + (f", {g.largest / g.fastest_step:.3g} x the largest step between clean neighbouring " 
+                                         f"samples" if g.fastest_step > 0 else "")
+    if policy == "fail":
+        raise DatasetError(f"{where}{label}: {place(g.first_row)}: a glitch: the position leaves the samples either "
+                           f"side by {size} and comes back, faster than the joint moves anywhere else in the record "
+                           f"({g.samples} such sample(s) in {g.runs} run(s); --glitches fail)")
+    notes.append(what + "; a joint cannot move there and back that fast (a sensor or wiring fault): replaced by "
+                 "interpolation between them (--glitches keep to keep them)")
+    return repaired(raw, mask), g
 
 
 def _saturation_note(m: ColumnMap, label: str, s: Saturation, u: Unit, kind: str) -> str:
