@@ -38,7 +38,10 @@ class LabviewAdaptation(Component):
         if not lo < 0.0 < hi:
             from .base import ParameterError
 
-            raise ParameterError(f"{self.where}.command_range: must contain 0 V, got {[lo, hi]}")
+            raise ParameterError(f"{self.where}.command_range: must contain 0 V (the valve's null: a positive command "
+                                 f"opens it one way, a negative one the other), got {[lo, hi]}; a unipolar output nulled "
+                                 f"mid-range (0 .. 10 V, null at 5 V) keeps [-10, 10] and its record is read with "
+                                 f"--column u_<joint>=SOURCE:*2-10")
 
     def lower(self, lw, a, spec, js):
         lw.AP[a, AP_U_MIN], lw.AP[a, AP_U_MAX] = self["command_range"]

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import output_error as oe
-from . import polarity
+from . import command_null, polarity
 from .calibration import calibrate, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
@@ -407,6 +407,11 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if signs:
             unexplained["polarity"] = signs
             unexplained["record_causes"] = polarity.causes(signs, spec) + unexplained["record_causes"]
+        # a command whose zero is not the valve's null (a unipolar output nulled mid-range) likewise
+        nulls = command_null.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
+        if nulls:
+            unexplained["command_null"] = nulls
+            unexplained["record_causes"] = command_null.causes(nulls) + unexplained["record_causes"]
     if unexplained and selected:
         # a named cause must explain the record: the effects tried stay in the report as the closest
         # candidates, the model is not extended

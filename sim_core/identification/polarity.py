@@ -71,13 +71,13 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
     out = {"joints": ev, "rule": (f"the record's and the model's correlation of command and speed have opposite signs, "
                                   f"each at least {CORRELATION_MIN:g} in size")}
     for j in flagged:
-        fit = _fit(rec, j, base_out, start, n)
+        fit = replay_fit(rec, j, base_out, start, n)
         U = rec.U.copy()
         U[:, rec.joint_names.index(j)] *= -1.0
         flipped = runner.simulate(spec, n, rec=replace(rec, U=U))
         mirrored = _best_mirror(spec, rec, runner, j, n, start)
-        ev[j].update({"fit": _pts(fit), "fit_command_reversed": _pts(_fit(rec, j, flipped, start, n)),
-                      "fit_position_mirrored": _pts(mirrored)})
+        ev[j].update({"fit": points(fit), "fit_command_reversed": points(replay_fit(rec, j, flipped, start, n)),
+                      "fit_position_mirrored": points(mirrored)})
     return out
 
 
@@ -93,8 +93,8 @@ def causes(result: dict, spec) -> list[str]:
                 f"{e['record']['correlation']:+.2f}; model {e['model']['speed_per_volt']:+.3g} {unit}/s per V, "
                 f"{e['model']['correlation']:+.2f}): a sign "
                 f"convention of the rig differs from its spec's, which no parameter or effect reverses. Validation fit "
-                f"{_fmt(e['fit'])} as recorded, {_fmt(e['fit_command_reversed'])} with the command reversed, "
-                f"{_fmt(e['fit_position_mirrored'])} with the position mirrored")
+                f"{fit_text(e['fit'])} as recorded, {fit_text(e['fit_command_reversed'])} with the command reversed, "
+                f"{fit_text(e['fit_position_mirrored'])} with the position mirrored")
         best = _better(e)
         if best == "command":
             said += (f". The command reversed explains it: the valve (or its amplifier) is wired the other way round "
@@ -154,7 +154,7 @@ def _best_mirror(spec, rec: Record, runner, j: str, n: int, start: int) -> float
             pose = dict(rec.initial_pose)
             pose[j] = c - pose[j]
             mirrored = replace(rec, angles=angles, initial_pose=pose)
-            seen[c] = _fit(mirrored, j, runner.simulate(spec, n, rec=mirrored), start, n)
+            seen[c] = replay_fit(mirrored, j, runner.simulate(spec, n, rec=mirrored), start, n)
         return seen[c]
 
     grid = np.linspace(lo, hi, MIRROR_GRID) if hi > lo else np.array([lo])
@@ -174,7 +174,8 @@ def _best_mirror(spec, rec: Record, runner, j: str, n: int, start: int) -> float
     return max(seen.values())
 
 
-def _fit(rec: Record, j: str, out, start: int, n: int) -> float:
+def replay_fit(rec: Record, j: str, out, start: int, n: int) -> float:
+    """The angle fit (points) of joint ``j`` on samples ``start``..``n`` of a replay ``out``; -inf if it failed."""
     if not out.ok or j not in out.angles:
         return -math.inf
     return float(nrmse_fit(rec.angles[j][start:n], out.angles[j][start:n]))
@@ -184,11 +185,11 @@ def _val(v) -> float:
     return -math.inf if v is None else float(v)
 
 
-def _pts(v: float):
+def points(v: float):
     return None if not math.isfinite(v) else round(float(v), 2)
 
 
-def _fmt(v) -> str:
+def fit_text(v) -> str:
     return "none (the replay diverged)" if v is None else f"{v:.1f} %"
 
 

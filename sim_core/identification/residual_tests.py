@@ -94,9 +94,10 @@ def transfer_estimate(sim: np.ndarray, meas: np.ndarray, rate: float) -> dict:
     nper = int(min(len(sim), max(64, 2 ** int(math.log2(max(64, rate * 5))))))
     f, Pss = signal.welch(sim, fs=rate, nperseg=nper)
     _, Psm = signal.csd(sim, meas, fs=rate, nperseg=nper)
-    _, coh = signal.coherence(sim, meas, fs=rate, nperseg=nper)
     with np.errstate(divide="ignore", invalid="ignore"):
+        _, coh = signal.coherence(sim, meas, fs=rate, nperseg=nper)
         H = Psm / Pss
+    coh = np.nan_to_num(coh, nan=0.0)        # a channel that never moves (a model stuck in an end stop) has none
     band = (f >= 0.3) & (f <= min(8.0, 0.4 * rate)) & (coh > 0.6) & np.isfinite(H)
     res = {"f": f.tolist(), "mag_db": (20 * np.log10(np.abs(H) + 1e-300)).tolist(),
            "phase_deg": np.degrees(np.angle(H)).tolist(), "coherence": coh.tolist(),
