@@ -27,6 +27,7 @@ MIN_SAMPLES = 50
 MIN_DURATION = 2.0          # s
 START_WINDOWS = (0.02, 0.05, 0.1, 0.2, 0.5)   # s: spans the start reading is fitted over (first_reading)
 END_STOP_MARGIN = 0.01      # rad: closer to a joint limit counts as end-stop contact
+STILL_SPAN = 10.0           # noise sigmas: a commanded joint whose reading spans less does not move
 
 
 @dataclass
@@ -146,9 +147,36 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
             f"{where}the commanded joint(s) {', '.join(excited)} have no measured angle column "
             f"({', '.join('q_' + j for j in excited)})"
         )
+    _check_motion(spec, angles, U, excited, where, notes)
     pose = _initial_pose(spec, angles, t, initial_pose, notes)
     return Record(source, t, U, angles, pressures, list(spec.joint_names), excited, pose, notes,
                   "true" if initial_pose == "spec" else "reading")
+
+
+def _check_motion(spec, angles, U, excited, where: str, notes: list[str]) -> None:
+    """A commanded joint whose reading never leaves its noise (the pump off, the valve unplugged, the
+    wrong column mapped) says nothing about the model: noted, and refused when no commanded joint moves."""
+    still = []
+    for j in excited:
+        if j not in angles:
+            continue
+        q = angles[j]
+        span = float(np.percentile(q, 99) - np.percentile(q, 1))
+        sigma = noise_std(q)
+        if span <= STILL_SPAN * sigma or span == 0.0:
+            u = U[:, spec.joint_names.index(j)]
+            unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
+            still.append(f"q_{j} spans {span:.3g} {unit} (1st to 99th percentile), "
+                         f"{span / sigma if sigma > 0 else 0.0:.3g} x its noise, while u_{j} spans {u.min():.4g} .. "
+                         f"{u.max():.4g} V")
+    if not still:
+        return
+    moving = [j for j in excited if j in angles and not any(s.startswith(f"q_{j} ") for s in still)]
+    what = "; ".join(still)
+    if not moving:
+        raise DatasetError(f"{where}no commanded joint moves ({what}): nothing to identify. Was the pump on and the "
+                           f"valve connected, and does the position column hold the joint's position?")
+    notes.append(f"commanded but not moving: {what}; the pump, the valve or the column mapping may be at fault")
 
 
 def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, float]:

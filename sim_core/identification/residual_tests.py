@@ -59,8 +59,12 @@ def correlation_band(e: np.ndarray, u: np.ndarray, max_lag: int, z: float = Z99)
 
 
 def ljung_box(x: np.ndarray, lags: int = 20) -> tuple[float, float]:
-    """(Q, p-value) of the Ljung-Box whiteness test."""
+    """(Q, p-value) of the Ljung-Box whiteness test; a series shorter than twice ``lags`` (a short
+    record, decimated) is tested over half its length."""
     n = len(x)
+    lags = min(lags, n // 2)
+    if lags < 1:
+        return 0.0, 1.0
     rho = autocorrelation(x, lags)[1:]
     q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
     return q, float(chi2.sf(q, lags))
