@@ -154,7 +154,19 @@ def test_time_going_backwards_names_the_row(tmp_path):
     assert proc.returncode == 2
     assert "backwards.csv" in proc.stderr and f"row {FX.BACK_ROW} (line {FX.BACK_ROW})" in proc.stderr
     assert "time goes backwards" in proc.stderr and "Traceback" not in proc.stderr
+    assert "second run" not in proc.stderr          # a step back, not back to the start
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_second_run_appended_to_the_log_is_named_with_where_to_split(tmp_path):
+    t = np.arange(300) * 0.02
+    rows = np.column_stack([np.concatenate([t, t[:200]]), np.full(500, 4.0), np.full(500, 1.0)])
+    np.savetxt(tmp_path / "two_runs.csv", rows, delimiter=",", fmt="%.4f")
+    proc = hydrohil("import", tmp_path / "two_runs.csv", "--robot", "hydrolek", "--out", tmp_path / "o.csv",
+                    "--no-header", "--column", "time=0", "--column", "q_j2=1:sensor_volts", "--column", "u_j2=2")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "row 301 (line 301): time goes backwards" in proc.stderr
+    assert "a second run seems to start there" in proc.stderr and "split the file before row 301" in proc.stderr
 
 
 BAD = [

@@ -69,9 +69,15 @@ def check_grid(t: np.ndarray, *, where: str, label: str, place) -> tuple[TimeGri
     back = np.flatnonzero(d < 0)
     if back.size:
         r = int(back[0]) + 2
+        step = float(np.median(d[: r - 2])) if r > 2 else 0.0
+        restart = ""
+        if r > 3 and t[r - 1] <= t[0] + 2.0 * step:      # back to where the file began: a logger restarted
+            restart = (f"; a second run seems to start there (time back to {t[r - 1]:.10g} s, the file began at "
+                       f"{t[0]:.10g} s): split the file before {place(r)} and read each run on its own (one as "
+                       f"--validation)")
         raise DatasetError(
             f"{where}column {label}: {place(r)}: time goes backwards, {t[r - 1]:.10g} s after "
-            f"{t[r - 2]:.10g} s in {place(r - 1)}; time must increase"
+            f"{t[r - 2]:.10g} s in {place(r - 1)}; time must increase{restart}"
         )
     keep = np.ones(t.size, dtype=bool)
     keep[1:] = d > 0
