@@ -147,7 +147,7 @@ def test_bad_records_give_clear_errors(cli, tmp_path, header, rows, needle):
 
 def test_bad_options_give_clear_errors(cli, tmp_path):
     csv = tmp_path / "ok.csv"
-    _write(csv, ["time", "u_j2", "q_j2"], [[i * 0.01, 1.0, -0.3] for i in range(400)])
+    _write(csv, ["time", "u_j2", "q_j2"], [[i * 0.01, 1.0, -0.3 + 0.001 * i] for i in range(400)])   # a joint that moves
     proc = cli("diagnose", "--robot", "hydrolek", csv, "--report", tmp_path / "r", "--effects", "warp_drive")
     assert proc.returncode == 2 and "warp_drive" in proc.stderr
     proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "missing.csv", "--report", tmp_path / "r")
