@@ -14,7 +14,7 @@ hidden effect as its runner-up is counted apart (the report then says what would
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
-        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--json FILE]
+        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic] [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -28,10 +28,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
 
-from rig_records import closed_loop_record, write_headerless  # noqa: E402
+from rig_records import closed_loop_record, logged_like_a_daq, write_headerless  # noqa: E402
 
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
@@ -48,6 +50,16 @@ def hidden_params(effect: str, spec, joint: str) -> dict | None:
             "valve_offset": {"offset": 0.25}, "none": None}[effect]
 
 
+def realistic_truth(spec, joint: str) -> tuple[tuple[str, dict], ...]:
+    """Physics of a real rig the diagnosis is not asked to name: seal friction with a breakaway
+    (Stribeck: static 4 %, sliding 2.5 % of the full-pressure force, falling over 1 % of the
+    full-flow speed)."""
+    sc = actuator_scales(spec, joint)
+    speed = sc["q_full"] * spec.supply["pressure"] / sc["torque"]       # full flow over A x lever: m/s or rad/s
+    return (("stribeck_friction", {"static_torque": 0.04 * sc["torque"], "coulomb_torque": 0.025 * sc["torque"],
+                                   "stribeck_velocity": 0.01 * speed, "smoothing_velocity": 0.001 * speed}),)
+
+
 def cli(*args) -> None:
     p = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True,
                        cwd=ROOT)
@@ -56,7 +68,7 @@ def cli(*args) -> None:
 
 
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
-             rig_set: tuple[str, ...] = ()) -> dict:
+             rig_set: tuple[str, ...] = (), realistic: bool = False) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -67,7 +79,10 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     params = hidden_params(effect, spec, joint)
     off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
     rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
-                                 seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every)
+                                 seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every,
+                                 extra=realistic_truth(spec, joint) if realistic else ())
+    if realistic:
+        rows = logged_like_a_daq(rows, np.random.default_rng(1000 + seed), bits=12, dropouts=3)
     write_headerless(rows, work / "log.csv")
     t0 = time.perf_counter()
     cli("import", work / "log.csv", "--robot", work / "rig", "--out", work / "rec.csv", "--no-header",
@@ -105,6 +120,9 @@ def main():
                     help="the rig's controller runs at M x the log's 50 Hz and the log keeps every M-th sample")
     ap.add_argument("--rig-set", action="append", default=[], metavar="KNOB=VALUE",
                     help="passed to 'rig new --set' (e.g. incline_deg=-90: a load hanging below the cylinder)")
+    ap.add_argument("--realistic", action="store_true",
+                    help="the truth has seal friction with a breakaway (Stribeck, out of the bank) and the log a 12-bit "
+                         "converter and three wiper dropouts to 0 V")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
@@ -114,7 +132,7 @@ def main():
             for effect in args.effects.split(","):
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
-                                 args.log_every, tuple(args.rig_set))
+                                 args.log_every, tuple(args.rig_set), args.realistic)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -129,7 +147,9 @@ def main():
                       f"{named}{amb}{err}; fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     print(f"\nrig off nominal: valve flow x{args.flow:g}, supply x{args.supply:g}"
           + (f"; controller at {args.log_every} x the log's rate" if args.log_every > 1 else "")
-          + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "") + "; right = named alone within "
+          + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "")
+          + ("; realistic: Stribeck seal friction in the truth, 12-bit volts, 3 dropouts" if args.realistic else "")
+          + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):
         sel = [c for c in cases if c["effect"] == effect]

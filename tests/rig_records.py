@@ -28,21 +28,24 @@ def reference_steps(lo: float, hi: float, duration: float, rng) -> callable:
 
 def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[str, float], seed: int,
                        duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
-                       start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1):
+                       start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1,
+                       extra: tuple[tuple[str, dict], ...] = ()):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
     ``hidden``: (effect, params) switched on at the rig's one actuated joint; ``kp``: V per joint unit
     (default: full command for 20 % of the range of motion); ``log_every``: the controller runs at
-    ``log_every`` x ``rate`` and every ``log_every``-th sample is logged (a logger slower than the loop)."""
+    ``log_every`` x ``rate`` and every ``log_every``-th sample is logged (a logger slower than the loop);
+    ``extra``: more (effect, params) of the truth at the joint, physics the diagnosis is not asked to
+    name (a Stribeck friction: real seals)."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
     joint = spec.joint_names[0]
     for path, factor in off.items():
         spec.set(path, spec.get(path) * factor)
-    if hidden is not None:
-        spec.enable_effect(hidden[0], joint, **hidden[1])
+    for name, params in ((hidden,) if hidden is not None else ()) + tuple(extra):
+        spec.enable_effect(name, joint, **params)
     i = spec.tree.index(spec.joint(joint).dof)
     lo_q, hi_q = float(spec.tree.lower[i]), float(spec.tree.upper[i])
     span = hi_q - lo_q
@@ -79,6 +82,18 @@ def as_record(spec, rows: np.ndarray, source: str = "log"):
     A, B = spec.get(f"joints.{j}.sensor.A"), spec.get(f"joints.{j}.sensor.B")
     ds = Dataset(["time", f"q_{j}", f"u_{j}"], np.column_stack([rows[:, 0], A * rows[:, 1] + B, rows[:, 2]]))
     return record_from_dataset(ds, spec, source=source)
+
+
+def logged_like_a_daq(rows: np.ndarray, rng, bits: int = 0, dropouts: int = 0, span_v: float = 10.0) -> np.ndarray:
+    """The rows as a plainer acquisition logs them: the sensor volts quantised by a ``bits``-bit
+    converter over ``span_v`` volts, and ``dropouts`` samples where the wiper lifts (0 V)."""
+    out = np.array(rows, float)
+    if bits:
+        q = span_v / 2 ** bits
+        out[:, 1] = np.round(out[:, 1] / q) * q
+    if dropouts:
+        out[rng.choice(np.arange(5, len(out) - 5), dropouts, replace=False), 1] = 0.0
+    return out
 
 
 def write_headerless(rows: np.ndarray, path) -> None:
