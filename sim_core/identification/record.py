@@ -156,7 +156,7 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
 def _check_motion(spec, angles, U, excited, where: str, notes: list[str]) -> None:
     """A commanded joint whose reading never leaves its noise (the pump off, the valve unplugged, the
     wrong column mapped) says nothing about the model: noted, and refused when no commanded joint moves."""
-    still = []
+    still: dict[str, str] = {}
     for j in excited:
         if j not in angles:
             continue
@@ -166,14 +166,13 @@ def _check_motion(spec, angles, U, excited, where: str, notes: list[str]) -> Non
         if span <= STILL_SPAN * sigma or span == 0.0:
             u = U[:, spec.joint_names.index(j)]
             unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
-            still.append(f"q_{j} spans {span:.3g} {unit} (1st to 99th percentile), "
-                         f"{span / sigma if sigma > 0 else 0.0:.3g} x its noise, while u_{j} spans {u.min():.4g} .. "
-                         f"{u.max():.4g} V")
+            still[j] = (f"q_{j} spans {span:.3g} {unit} (1st to 99th percentile), "
+                        f"{span / sigma if sigma > 0 else 0.0:.3g} x its noise, while u_{j} spans {u.min():.4g} .. "
+                        f"{u.max():.4g} V")
     if not still:
         return
-    moving = [j for j in excited if j in angles and not any(s.startswith(f"q_{j} ") for s in still)]
-    what = "; ".join(still)
-    if not moving:
+    what = "; ".join(still.values())
+    if all(j in still for j in excited if j in angles):
         raise DatasetError(f"{where}no commanded joint moves ({what}): nothing to identify. Was the pump on and the "
                            f"valve connected, and does the position column hold the joint's position?")
     notes.append(f"commanded but not moving: {what}; the pump, the valve or the column mapping may be at fault")

@@ -105,7 +105,8 @@ def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> Im
     if ds.robot and ds.robot != spec.name:
         notes.append(f"{path}: recorded on robot {ds.robot!r}, read for {spec.name!r}")
     t = ds.time
-    grid, _ = check_grid(t, where=where, label="'time'", place=lambda r: f"row {r} (line {r + 1})" if not is_parquet(path) else f"row {r}")
+    place = (lambda r: f"row {r}") if is_parquet(path) else (lambda r: f"row {r} (line {r + 1})")
+    grid, _ = check_grid(t, where=where, label="'time'", place=place)
     reports = []
     policy = options.glitches if options is not None else "repair"
     for c, name in enumerate(ds.columns):
@@ -116,8 +117,10 @@ def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> Im
         unit = parse_unit(None, kind, column=name)
         found = None
         if kind in POSITION_KINDS:
-            ds.data[:, c], found = _glitch_check(ds.data[:, c], policy, where, f"column {name}", unit,
-                                                 lambda r: f"row {r}", notes)
+            fixed, found = _glitch_check(ds.data[:, c], policy, where, f"column {name}", unit, place, notes)
+            if found is not None:
+                ds.data = ds.data.copy() if not ds.data.flags.writeable else ds.data
+                ds.data[:, c] = fixed
         col = ds.data[:, c]
         reports.append(ColumnReport(name, f"header {name!r}", unit, float(col.min()), float(col.max()), None, found))
     return ImportResult(str(path), spec.name, ds, reports, grid, notes, {}, options)
