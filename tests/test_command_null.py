@@ -52,6 +52,16 @@ def test_a_null_beyond_the_valve_offset_bound_is_flagged_and_within_it_is_not():
         assert off_null(rest_command(u, q, DT, (-20.0, 20.0)), RANGE) is flagged, null
 
 
+def test_a_wide_deadband_straddling_the_null_is_not_flagged():
+    # a controller stopping anywhere inside a 2 V deadband: rest commands spread over both signs,
+    # their median may sit past the bound
+    b = bound(RANGE)
+    straddle = {"median": 1.6, "p10": -1.9, "p90": 1.95, "still_share": 0.4}
+    assert straddle["median"] > b and not off_null(straddle, RANGE)
+    assert off_null({**straddle, "p10": b + 0.1}, RANGE)            # all of it past the bound
+    assert off_null({"median": -1.8, "p10": -1.95, "p90": -b - 0.1, "still_share": 0.4}, RANGE)
+
+
 def test_a_joint_that_barely_stands_still_is_not_judged():
     rest = {"median": 5.0, "p10": 4.9, "p90": 5.1, "still_share": 0.5 * MIN_STILL}
     assert not off_null(rest, RANGE)

@@ -11,10 +11,13 @@ unexplained; this check says why and replays the fix.
 Evidence per joint: the command where the recorded joint stands still (its smoothed speed below
 ``STILL_SPEED`` of its 95th-percentile speed, away from its end stops, the command inside its range).
 In closed loop that is the controller holding the joint: at the valve's null plus what holding it
-takes (a leak, a load through a deadband; within +-0.7 V on the templates' records with a 0.6 V
-deadband, a leak or a Coulomb friction). Flagged where the median of those commands lies beyond the
-valve offset's bound and the joint stands still on at least ``MIN_STILL`` of the samples. The fix,
-the command shifted by that median, is replayed on the baseline model.
+takes (a leak, a null offset, a load through a deadband). On the three templates' records (seed 2)
+the median sits within +-0.25 V of 0 V, a 0.25 V null offset's at -0.25 V, and with a 0.8 V
+deadband within +-0.8 V, its 10-90 % span straddling 0 V (the controller stops anywhere inside the
+deadband). Flagged where the whole 10-90 % span of those commands lies beyond the valve offset's
+bound on one side (a wide deadband straddles the null; a unipolar output sits tightly off it) and
+the joint stands still on at least ``MIN_STILL`` of the samples. The fix, the command shifted by
+their median, is replayed on the baseline model.
 """
 
 from __future__ import annotations
@@ -65,8 +68,12 @@ def bound(command_range) -> float:
 
 
 def off_null(rest: dict | None, command_range) -> bool:
-    """Whether the joint stands still at a command beyond any valve null offset."""
-    return rest is not None and rest["still_share"] >= MIN_STILL and abs(rest["median"]) > bound(command_range)
+    """Whether the joint stands still at commands beyond any valve null offset: its 10-90 % span of
+    them wholly on one side, past the bound."""
+    if rest is None or rest["still_share"] < MIN_STILL:
+        return False
+    b = bound(command_range)
+    return rest["p10"] > b or rest["p90"] < -b
 
 
 def read_as(null: float, u: np.ndarray, command_range) -> list[str]:
@@ -103,8 +110,9 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
     if not found:
         return {}
     return {"joints": found, "rule": (f"the median command where the joint stands still (speed below {STILL_SPEED:g} of "
-                                      f"its 95th percentile, on at least {MIN_STILL:.0%} of the samples) lies beyond the "
-                                      f"valve null offset the bank can name ({SPAN:.0%} of the largest command)")}
+                                      f"its 95th percentile, on at least {MIN_STILL:.0%} of the samples): its 10-90 % span "
+                                      f"lies wholly beyond the valve null offset the bank can name ({SPAN:.0%} of the "
+                                      f"largest command), on one side")}
 
 
 def causes(result: dict) -> list[str]:
