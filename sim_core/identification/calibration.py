@@ -25,7 +25,7 @@ calibration finding.
 After the fit each freed parameter is checked: identified when ``|value / sigma| >= 3`` and no
 correlation beyond ``CORRELATION_LIMIT`` ties it to another freed parameter (of such a pair the flow
 gain is kept: it is the baseline). A parameter that is not identified is reported as such and reset
-to its nominal value, the rest refitted; a misfit the calibration explains is a calibration finding
+to its nominal value, the rest refitted (``elimination.py``: which go, and when); a misfit the calibration explains is a calibration finding
 (``Calibration.changes``), not an effect.
 """
 
@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import output_error as oe
+from .elimination import eliminate
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from .record import Record
 from .simulation import Runner
@@ -297,54 +298,26 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     if not uncertainty or not res.ok:
         changes = [_row(fp, nominal, res, res, None, why) for fp in free]
         return Calibration(res.spec, res, free, changes)
-    # The parameters the fit cannot pin down go back to nominal and the rest are refitted. When none
-    # is identified the set is too large for the record (supply pressure, load, flow gain and sensor
-    # gain that together explain one feature of a closed-loop record without pressures, or a misfit
-    # dominated by an effect the model lacks): then only the weakest goes, and the rest are judged
-    # again, until some are identified.
-    keep, current = list(free), res
-    dropped: dict[str, tuple[str, oe.FitResult]] = {}
-    cal_spec = res.spec
-    bound_only = False          # after the first drop only a parameter pushed to its range's end goes
-    while keep:
-        verdict = identifiability(current)
-        failing = [fp for fp in keep if verdict[fp.key] is not None
-                   and (not bound_only or verdict[fp.key].startswith("at the"))]
-        if not failing:
-            break
-        every = not bound_only and len(failing) == len(keep)
-        if every:
-            failing = [min(failing, key=lambda fp: _strength(current, fp.key, verdict[fp.key]))]
-        for fp in failing:
-            dropped[fp.key] = (verdict[fp.key], current)
-        keep = [fp for fp in keep if fp not in failing]
+    # The parameters the fit cannot pin down go back to nominal, one at a time, the rest refitted
+    # each time (elimination.py)
+    def refit(keep, current):
         reset = spec.copy()
         for fp in free:
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
-        if keep:
-            current = oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
-            cal_spec = current.spec
-        else:
-            cal_spec = reset
-        if not every:
-            bound_only = True
+        return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
+
+    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank)
+    if keep:
+        cal_spec = current.spec
+    else:
+        cal_spec = spec.copy()
+        for fp in free:
+            fp.apply(cal_spec, nominal[fp.key])
     final = current
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
-
-
-def _strength(res: oe.FitResult, key: str, reason: str) -> tuple[int, float]:
-    """How well ``res`` pins ``key`` down: a parameter flagged for its correlation with another is
-    weaker than any judged by its own |value/sigma| (lowest first; of the correlated, the one
-    ranked later in KEEP_ORDER)."""
-    if reason.startswith("at the"):
-        return (-1, 0.0)
-    if reason.startswith("correlation"):
-        return (0, -float(keep_rank(key)))
-    v, s = res.values.get(key, 0.0), res.sigma.get(key, math.inf)
-    return (1, abs(v) / s if s > 0 and math.isfinite(s) else 0.0)
 
 
 BOUND_SHARE = 1e-3          # within this share of its range (in fit coordinates) of an end, a parameter is at it

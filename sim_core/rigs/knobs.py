@@ -69,7 +69,8 @@ TEMPLATE_KNOBS: dict[str, list[Knob]] = {
     "cylinder": common_knobs("lift", 100.0, 14e6, 2.0e-4) + [
         Knob("orientation", "-", "direction of travel: vertical (lifting against gravity), horizontal, or "
              "incline (give incline_deg)", "vertical", choices=("vertical", "horizontal", "incline")),
-        Knob("incline_deg", "deg", "travel angle above horizontal (90 = vertical); implies orientation=incline",
+        Knob("incline_deg", "deg", "travel angle of the extending rod above horizontal (90 = vertical, extending lifts; -90 = a load "
+             "hanging below the cylinder, lifted by retracting: the rod side carries it); implies orientation=incline",
              90.0, -90.0, 90.0),
         Knob("stroke", "m", "cylinder stroke = the slide's travel (joint limits 0..stroke)", 0.5, 0.02, 5.0),
         Knob("carriage_kg", "kg", "moving mass without the load (piston, rod, carriage)", 15.0, 0.1, 5000.0),

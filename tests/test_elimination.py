@@ -1,0 +1,135 @@
+"""Which calibrated parameters go back to nominal (identification/elimination.py): on linear least
+squares with known columns and on scripted fit results, no simulation; judged by the calibration's
+own identifiability."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim_core.identification import output_error as oe
+from sim_core.identification.calibration import identifiability, keep_rank
+from sim_core.identification.elimination import eliminate, strength
+from sim_core.identification.parameters import FreeParameter
+
+FLOW, GAIN = "joints.lift.valve.rated_flow", "effects.sensor_gain.lift.gain"
+OFFSET, MASS = "effects.sensor_offset.lift.offset", "effects.payload.lift.mass"
+KEYS = [FLOW, GAIN, OFFSET, MASS]
+
+
+class LinearRecord:
+    """y = J theta + noise, the parameters held at 0 (their nominal value) when not free: a fit is
+    ordinary least squares with the covariance s^2 (J'J)^-1, as the calibration's fits report it."""
+
+    def __init__(self, seed: int = 3, n: int = 200, noise: float = 1.7):
+        rng = np.random.default_rng(seed)
+        s = rng.standard_normal((n, 4))
+        # the flow and the sensor gain's columns correlate at 0.97 (below the 0.98 of the
+        # correlation rule): each alone is well determined, the two together barely
+        self.J = np.column_stack([s[:, 0], s[:, 0] + 0.25 * s[:, 1], s[:, 2], s[:, 3]])
+        self.y = self.J @ np.array([1.0, 1.0, 0.0, 3.0]) + noise * rng.standard_normal(n)
+        self.free = {k: FreeParameter(k, -1e3, 1e3) for k in KEYS}
+        self.fits = 0
+
+    def fit(self, keys: list[str]) -> oe.FitResult:
+        self.fits += 1
+        idx = [KEYS.index(k) for k in keys]
+        A = self.J[:, idx]
+        theta, *_ = np.linalg.lstsq(A, self.y, rcond=None)
+        r = self.y - A @ theta
+        cov = float(r @ r) / (len(r) - len(idx)) * np.linalg.inv(A.T @ A)
+        sd = np.sqrt(np.diag(cov))
+        return oe.FitResult([self.free[k] for k in keys], dict(zip(keys, map(float, theta))), float(r @ r),
+                            sigma=dict(zip(keys, map(float, sd))), correlation=cov / np.outer(sd, sd))
+
+    def refit(self, keep: list[FreeParameter], current: oe.FitResult) -> oe.FitResult:
+        return self.fit([fp.key for fp in keep])
+
+
+def test_beside_identified_parameters_every_unidentified_one_goes_at_once():
+    """A flow gain and a sensor gain the record barely tells apart (each |value/sigma| about 2) beside
+    an identified load: both go back to nominal in one step, with the offset (no effect at all),
+    and the load is refitted alone, not one parameter after the other."""
+    rec = LinearRecord()
+    first = rec.fit(KEYS)
+    verdict = identifiability(first)
+    # the premise: the flow and the sensor gain are each unidentified with both free, the offset
+    # too; the load is identified; and either of the pair alone would be identified
+    assert verdict[FLOW] is not None and verdict[GAIN] is not None and verdict[OFFSET] is not None
+    assert "sigma" in verdict[FLOW] and "sigma" in verdict[GAIN]
+    assert verdict[MASS] is None
+    assert identifiability(rec.fit([FLOW, MASS]))[FLOW] is None
+    rec.fits = 0
+    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    assert [fp.key for fp in keep] == [MASS]
+    assert set(dropped) == {FLOW, GAIN, OFFSET} and all(dropped[k][1] is first for k in dropped)
+    assert rec.fits == 1
+    assert identifiability(final)[MASS] is None
+
+
+def test_nothing_identified_drops_everything_and_returns_the_last_fit():
+    rec = LinearRecord(noise=200.0)         # noise swamps every column
+    first = rec.fit(KEYS)
+    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    assert keep == [] and set(dropped) == set(KEYS)
+    assert rec.fits == len(KEYS)             # the first fit, then one refit per drop but the last
+    assert final is dropped[list(dropped)[-1]][1]
+
+
+def test_identified_parameters_are_not_refitted():
+    rec = LinearRecord(noise=0.01)
+    first = rec.fit([FLOW, MASS])
+    rec.fits = 0
+    keep, final, dropped = eliminate([rec.free[FLOW], rec.free[MASS]], first, identifiability, rec.refit, keep_rank)
+    assert [fp.key for fp in keep] == [FLOW, MASS] and final is first and dropped == {} and rec.fits == 0
+
+
+def _scripted(free: list[FreeParameter], values: dict[str, float], sigma: dict[str, float]) -> oe.FitResult:
+    return oe.FitResult(free, values, 1.0, sigma=sigma)
+
+
+def test_while_none_is_identified_only_the_weakest_goes_then_after_a_drop_only_range_ends():
+    """Synthetic fits in sequence (no simulation): every parameter fails, so only the weakest (one at
+    an end of its range) goes; in the refit two are identified and one is not, which goes; in the
+    next refit one identified before is now just under 3 sigma (kept: after a drop beside identified
+    ones only a parameter pushed to an end of its range goes) and another sits on its range's end
+    (goes)."""
+    mass, ps = FreeParameter(MASS, 50.0, 200.0), FreeParameter("supply.pressure", 1e7, 2e7)
+    flow, gain = FreeParameter(FLOW, 1e-5, 1e-3), FreeParameter(GAIN, 0.5, 2.0)
+    free = [mass, ps, flow, gain]
+    first = _scripted(free, {MASS: 100.0, "supply.pressure": 2e7, FLOW: 2e-4, GAIN: 1.0},
+                      {MASS: 50.0, "supply.pressure": 1e5, FLOW: 1e-4, GAIN: 1.0})
+    second = _scripted([mass, flow, gain], {MASS: 100.0, FLOW: 2e-4, GAIN: 1.0}, {MASS: 5.0, FLOW: 1e-5, GAIN: 1.0})
+    third = _scripted([mass, flow], {MASS: 50.0, FLOW: 2e-4}, {MASS: 1.0, FLOW: 2e-4 / 2.9})
+    fourth = _scripted([flow], {FLOW: 2e-4}, {FLOW: 2e-4 / 2.9})
+    script = [second, third, fourth]
+    asked = []
+
+    def refit(keep, current):
+        asked.append([fp.key for fp in keep])
+        return script.pop(0)
+
+    keep, final, dropped = eliminate(free, first, identifiability, refit, keep_rank)
+    assert list(dropped) == ["supply.pressure", GAIN, MASS]
+    assert "at the upper end" in dropped["supply.pressure"][0] and dropped["supply.pressure"][1] is first
+    assert "sigma" in dropped[GAIN][0] and dropped[GAIN][1] is second
+    assert "at the lower end" in dropped[MASS][0] and dropped[MASS][1] is third
+    assert asked == [[MASS, FLOW, GAIN], [MASS, FLOW], [FLOW]]
+    assert [fp.key for fp in keep] == [FLOW] and final is fourth       # under 3 sigma, kept
+
+
+def test_the_weakest_goes_first_range_end_then_correlation_then_value_over_sigma():
+    free = [FreeParameter(MASS, 50.0, 200.0), FreeParameter(FLOW, 1e-5, 1e-3), FreeParameter(GAIN, 0.5, 2.0)]
+    res = oe.FitResult(free, {MASS: 50.0, FLOW: 2e-4, GAIN: 1.0}, 0.0,
+                       sigma={MASS: 0.1, FLOW: 1e-4, GAIN: 1.0})
+    at_end = "at the lower end of its range [50, 200]: ..."
+    tied = f"correlation +0.990 with {FLOW}: the record cannot tell them apart"
+    ranked = sorted([(MASS, at_end), (GAIN, tied), (FLOW, "|value/sigma| = 2 < 3")],
+                    key=lambda kr: strength(res, kr[0], kr[1], keep_rank))
+    assert [k for k, _ in ranked] == [MASS, GAIN, FLOW]
+    # among those judged by |value/sigma| the lower ratio goes first
+    assert strength(res, GAIN, "|value/sigma| = 1 < 3", keep_rank) < strength(res, FLOW, "|value/sigma| = 2 < 3",
+                                                                               keep_rank)
+    # of two flagged for correlation the one ranked later in KEEP_ORDER goes first
+    assert strength(res, GAIN, tied, keep_rank) < strength(res, MASS, tied, keep_rank)
