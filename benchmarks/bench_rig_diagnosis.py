@@ -14,7 +14,8 @@ hidden effect as its runner-up is counted apart (the report then says what would
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
-        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic] [--json FILE]
+        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
+        [--integral-time S] [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -68,7 +69,7 @@ def cli(*args) -> None:
 
 
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
-             rig_set: tuple[str, ...] = (), realistic: bool = False) -> dict:
+             rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -80,7 +81,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
     rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
                                  seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every,
-                                 extra=realistic_truth(spec, joint) if realistic else ())
+                                 extra=realistic_truth(spec, joint) if realistic else (), ti=ti)
     if realistic:
         rows = logged_like_a_daq(rows, np.random.default_rng(1000 + seed), bits=12, dropouts=3)
     write_headerless(rows, work / "log.csv")
@@ -123,6 +124,8 @@ def main():
     ap.add_argument("--realistic", action="store_true",
                     help="the truth has seal friction with a breakaway (Stribeck, out of the bank) and the log a 12-bit "
                          "converter and three wiper dropouts to 0 V")
+    ap.add_argument("--integral-time", type=float, default=None, metavar="S",
+                    help="the rig's controller is PI with this integral time (s; integral gain kp / S), not P")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
@@ -132,7 +135,7 @@ def main():
             for effect in args.effects.split(","):
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
-                                 args.log_every, tuple(args.rig_set), args.realistic)
+                                 args.log_every, tuple(args.rig_set), args.realistic, args.integral_time)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -149,6 +152,7 @@ def main():
           + (f"; controller at {args.log_every} x the log's rate" if args.log_every > 1 else "")
           + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "")
           + ("; realistic: Stribeck seal friction in the truth, 12-bit volts, 3 dropouts" if args.realistic else "")
+          + (f"; PI control, integral time {args.integral_time:g} s" if args.integral_time else "")
           + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):

@@ -29,7 +29,7 @@ def reference_steps(lo: float, hi: float, duration: float, rng) -> callable:
 def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[str, float], seed: int,
                        duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
                        start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1,
-                       extra: tuple[tuple[str, dict], ...] = ()):
+                       extra: tuple[tuple[str, dict], ...] = (), ti: float | None = None):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
@@ -37,7 +37,8 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     (default: full command for 20 % of the range of motion); ``log_every``: the controller runs at
     ``log_every`` x ``rate`` and every ``log_every``-th sample is logged (a logger slower than the loop);
     ``extra``: more (effect, params) of the truth at the joint, physics the diagnosis is not asked to
-    name (a Stribeck friction: real seals)."""
+    name (a Stribeck friction: real seals); ``ti``: integral time (s) of a PI controller (integral
+    gain kp / ti), its integral frozen while the command saturates (anti-windup); None: P only."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
@@ -55,18 +56,23 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     sim = Simulator(ctx)
     u_lo, u_hi = spec.joint(joint).command_range
     kp = kp if kp is not None else u_hi / (0.2 * span)
+    ki = 0.0 if ti is None else kp / ti
     ref = reference_steps(lo_q + 0.2 * span, hi_q - 0.2 * span, duration, rng)
     A = float(spec.get(f"joints.{joint}.sensor.A"))
     B = float(spec.get(f"joints.{joint}.sensor.B"))
     rows = []
-    t = 0.0
+    t, integral = 0.0, 0.0
     y = sim.sample()[0]
     while t < duration:
         volts = float(y[L.YA_SENS_V])
         pos = A * volts + B                      # the rig's controller reads its own sensor
-        u = float(np.clip(kp * (ref(t) - pos), u_lo, u_hi))
+        e = ref(t) - pos
+        raw = kp * e + ki * integral
+        u = float(np.clip(raw, u_lo, u_hi))
         rows.append((t, volts, round(u, 3)))
         dt = (1.0 + rng.uniform(-jitter, jitter)) / (rate * log_every)
+        if raw == u:
+            integral += e * dt
         y = sim.step(np.array([u]), dt)[0]
         t += dt
     return np.array(rows)[::log_every], spec
