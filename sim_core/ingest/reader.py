@@ -165,12 +165,17 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
                            f"with --rate HZ")
     units = [_unit(m, spec, source) for m in maps]
     labels = [source.label(m) for m in maps]          # where each column comes from
-    raw, place = source.read([m.source for m in maps], [f"{m.name} ({lab})" for m, lab in zip(maps, labels)])
+    k_time = next((i for i, m in enumerate(maps) if m.name == "time"), None)
+    raw, place = source.read([m.source for m in maps], [f"{m.name} ({lab})" for m, lab in zip(maps, labels)],
+                             clock=k_time)
     rows = raw.shape[0]
 
     # time grid first: it decides which rows stay
     if has_time:
-        k = next(i for i, m in enumerate(maps) if m.name == "time")
+        k = k_time
+        if source.clock and (units[k].scale != 1.0 or units[k].offset != 0.0):
+            raise DatasetError(f"{where}column time ({labels[k]}) holds clock readings ({source.clock}), read in "
+                               f"seconds: drop the unit {units[k].text!r} from --column {maps[k].text!r}")
         t = units[k].convert(raw[:, k])
         grid, keep = check_grid(t, where=where, label=f"time ({labels[k]})", place=place)
         t = t[keep] - t[keep][0]
@@ -294,6 +299,7 @@ class _Source:
     notes: list[str]
     names: list[str] | None
     n_fields: int
+    clock: str | None = None        # after read: the time column's clock readings ('time of day', ...), if any
 
     def index(self, src: str | int, label: str) -> int:
         raise NotImplementedError
@@ -361,9 +367,10 @@ class _TextSource(_Source):
         self.names = self.layout.names
         self.n_fields = self.layout.n_columns
 
-    def read(self, sources, labels):
+    def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        self._cols = read_columns(self.layout, idx, labels, cut_last_line=True)
+        self._cols = read_columns(self.layout, idx, labels, cut_last_line=True, clock=clock)
+        self.clock = self._cols.clock
         return self._cols.data, lambda r: f"row {r} (line {self.line(r)})"
 
     def line(self, row: int) -> int:
@@ -385,7 +392,7 @@ class _ParquetSource(_Source):
     def unit_of(self, name: str) -> str | None:
         return self.table.units.get(name)
 
-    def read(self, sources, labels):
+    def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
         data = self.table.columns([self.names[i] for i in idx])
         return data, (lambda r: f"row {r}")
@@ -447,7 +454,7 @@ class _JoinedSource(_Source):
         k, _ = self._part(self.names.index(name))
         return self.parts[k].unit_of(name)
 
-    def read(self, sources, labels):
+    def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, lab)) for s, lab in zip(sources, labels)]
         wanted: dict[int, list[int]] = {}                 # part -> positions in ``sources``
         for pos, i in enumerate(idx):
@@ -455,7 +462,11 @@ class _JoinedSource(_Source):
         out: list[np.ndarray | None] = [None] * len(idx)
         rows = {}
         for k, positions in sorted(wanted.items()):
-            data, _ = self.parts[k].read([idx[p] - self.first[k] for p in positions], [labels[p] for p in positions])
+            own_clock = positions.index(clock) if clock in positions else None
+            data, _ = self.parts[k].read([idx[p] - self.first[k] for p in positions], [labels[p] for p in positions],
+                                         clock=own_clock)
+            if own_clock is not None:
+                self.clock = self.parts[k].clock
             rows[k] = data.shape[0]
             for j, p in enumerate(positions):
                 out[p] = data[:, j]

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import clock as clock_readings
+
 BINARY_PROBE = 8192             # bytes looked at to tell a text file from a binary one
 _NUMBER_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 DELIMITER_WORDS = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None, " ": None,
@@ -64,6 +66,7 @@ class TextColumns:
     data: np.ndarray                # [rows, k]
     layout: TextLayout
     _lines: np.ndarray | None = None
+    clock: str | None = None        # the clock column's readings: 'date and time' or 'time of day' (in seconds)
 
     def line(self, row: int) -> int:
         """File line number of data row ``row`` (from 1)."""
@@ -171,7 +174,7 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
             notes.append("decimal separator: comma (detected)")
     cells = [c.strip() for c in _split(first[0], delimiter)]
     if header is None:
-        header = not all(_is_number(c, decimal) for c in cells if c)
+        header = not all(_is_number(c, decimal) or clock_readings.kind(c) for c in cells if c)
         if not header:
             notes.append(f"no header row: line {first[1]} holds numbers only, read as data (columns by 0-based index)")
     if not header:
@@ -207,16 +210,36 @@ def _delimiter_name(d: str | None) -> str:
     return {None: "whitespace", "\t": "tab", ";": "';'", ",": "','", "|": "'|'"}.get(d, repr(d))
 
 
-def read_columns(layout: TextLayout, indices: list[int], labels: list[str], *, cut_last_line: bool = False) -> TextColumns:
+def read_columns(layout: TextLayout, indices: list[int], labels: list[str], *, cut_last_line: bool = False,
+                 clock: int | None = None) -> TextColumns:
     """Columns ``indices`` (0-based) as float64 [rows, k]; ``labels`` name them in messages.
     ``cut_last_line``: a last row with too few values (a logger stopped mid-line) is dropped with a
-    note instead of being an error."""
-    data = _fast(layout, indices)
-    if data is None or not np.isfinite(data).all():
-        return _slow(layout, indices, labels, cut_last_line)
-    if data.shape[0] == 0:
-        raise _error(f"{layout.path}: no data rows")
-    return TextColumns(data, layout)
+    note instead of being an error. ``clock``: the position (in ``indices``) of a column that may
+    hold clock readings (:mod:`.clock`, the time column): when its first cell is one, every cell
+    must be one of the same kind, read as seconds (a time of day past midnight counted on)."""
+    reading = None
+    if clock is not None:
+        rows = _rows(layout)
+        first = next(rows, (0, []))[1]
+        rows.close()
+        cell = first[indices[clock]] if indices[clock] < len(first) else ""
+        if not _is_number(cell, layout.decimal):
+            reading = clock_readings.kind(cell)
+    if reading is None:
+        data = _fast(layout, indices)
+        if data is None or not np.isfinite(data).all():
+            return _slow(layout, indices, labels, cut_last_line)
+        if data.shape[0] == 0:
+            raise _error(f"{layout.path}: no data rows")
+        return TextColumns(data, layout)
+    out = _slow(layout, indices, labels, cut_last_line, clock=(clock, reading, clock_readings.whole_seconds(cell)))
+    out.clock = reading
+    passed = 0
+    if reading == "time of day":
+        out.data[:, clock], passed = clock_readings.past_midnight(out.data[:, clock])
+    layout.notes.append(f"column {labels[clock]}: clock readings ({reading}), read as seconds from the first row"
+                        + (f"; the clock passed midnight {passed} time(s), a day added each time" if passed else ""))
+    return out
 
 
 def _fast(layout: TextLayout, indices: list[int]) -> np.ndarray | None:
@@ -281,8 +304,11 @@ def _data_lines(layout: TextLayout) -> np.ndarray:
     return np.fromiter((ln for ln, _ in _rows(layout)), dtype=np.int64)
 
 
-def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_line: bool) -> TextColumns:
-    """Line by line: the exact column, row and line of the first bad cell."""
+def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_line: bool,
+          clock: tuple[int, str, int] | None = None) -> TextColumns:
+    """Line by line: the exact column, row and line of the first bad cell. ``clock``: (position,
+    kind, whole seconds of the first reading) of a column of clock readings, read as seconds after
+    the first reading's whole second."""
     path, n = layout.path, layout.n_fields
     cols = [array.array("d") for _ in indices]
     lines = array.array("q")
@@ -304,10 +330,21 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
                          f"{layout.n_columns}")
         for k, c in enumerate(indices):
             cell = cells[c]
+            if clock is not None and k == clock[0]:
+                v = clock_readings.seconds(cell, clock[2]) if clock_readings.kind(cell) == clock[1] else None
+                if v is None:
+                    what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a {clock[1]}"
+                    raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}, where the first row "
+                                 f"holds a {clock[1]} (the column is read as clock readings)")
+                cols[k].append(v)
+                continue
             try:
                 v = _to_float(cell, layout.decimal)
             except ValueError:
                 what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a number"
+                if re.fullmatch(r"\d{4}-\d{2}-\d{2}", cell.strip()) and layout.delimiter is None:
+                    what += (" but a date: with blanks between the columns a date and its time of day are two "
+                             "columns; map the time of day as the time column")
                 raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}") from None
             if v != v or v in (float("inf"), float("-inf")):
                 raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {cell.strip()} is not a finite number")
