@@ -158,3 +158,31 @@ def test_clock_rules():
     first = clock.whole_seconds("2026-11-26 12:03:45.000001")
     assert clock.seconds("2026-11-26 12:03:45.000001", first) == pytest.approx(1e-6, abs=1e-12)
     assert json.dumps(clock.seconds("00:00:00")) == "0.0"
+
+
+def test_parquet_timestamps_times_of_day_and_durations(tmp_path, rig):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    n = 200
+    steps = np.round(offsets(n, jitter=0.05) * 1e6).astype(np.int64)
+    steps -= steps[0]                                                      # microseconds after the first row
+    v = 2.0 + np.sin(np.arange(n) * 0.02)
+    u = np.cos(np.arange(n) * 0.02)
+    night = (86399 * 1_000_000 + steps) % (86400 * 1_000_000)             # a time of day across midnight
+    columns = {
+        "stamp": pa.array(np.datetime64("2026-11-26T12:03:45.120") + steps.astype("timedelta64[us]")),
+        "zoned": pa.array(np.datetime64("2026-11-26T12:03:45.120") + steps.astype("timedelta64[us]"),
+                          type=pa.timestamp("us", tz="Europe/Helsinki")),
+        "day": pa.array(night, type=pa.time64("us")),
+        "elapsed": pa.array(steps.astype("timedelta64[us]")),
+    }
+    pq.write_table(pa.table({**columns, "pos": v, "cmd": u}), tmp_path / "log.parquet")
+    for name in columns:
+        res = imported(tmp_path / "log.parquet", rig, columns=(f"time={name}", "q_lift=pos:sensor_volts", "u_lift=cmd"))
+        assert np.max(np.abs(res.dataset["time"] - steps * 1e-6)) < 1e-9, name
+        assert any("clock readings" in n for n in res.notes), (name, res.notes)
+    with pytest.raises(DatasetError, match="drop the unit"):
+        imported(tmp_path / "log.parquet", rig, columns=("time=stamp:ms", "q_lift=pos:sensor_volts", "u_lift=cmd"))
+    with pytest.raises(DatasetError, match="holds timestamp"):                 # not as a measured column
+        imported(tmp_path / "log.parquet", rig, columns=("time=elapsed", "q_lift=stamp:sensor_volts", "u_lift=cmd"))

@@ -61,14 +61,29 @@ class ParquetTable:
         self.rows = self._file.metadata.num_rows
         self._types = {f.name: f.type for f in schema}
 
-    def columns(self, names: list[str]) -> np.ndarray:
+    def clock_kind(self, name: str) -> str | None:
+        """'date and time' (a timestamp column), 'time of day' (time32/64) or 'duration' for a column of
+        clock readings, else None."""
+        import pyarrow as pa
+
+        typ = self._types[name]
+        return ("date and time" if pa.types.is_timestamp(typ) else "time of day" if pa.types.is_time(typ)
+                else "duration" if pa.types.is_duration(typ) else None)
+
+    def columns(self, names: list[str], clock: int | None = None) -> np.ndarray:
         """Columns ``names`` as float64 [rows, k], read in one pass; errors for text columns, missing
-        and non-finite values name the column and row."""
+        and non-finite values name the column and row. ``clock``: the position of a column that may
+        hold clock readings (timestamps, times of day, durations: the time column), read as seconds
+        from its first row (a time of day counted on past midnight)."""
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        for name in names:
+        from .clock import past_midnight
+
+        for k, name in enumerate(names):
             typ = self._types[name]
+            if k == clock and self.clock_kind(name):
+                continue
             if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)):
                 raise _error(f"{self.path}: column {name!r} holds {typ}, not numbers")
         try:
@@ -81,6 +96,13 @@ class ParquetTable:
             if col.null_count:
                 r = int(pc.index(pc.is_null(col), True).as_py()) + 1
                 raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value)")
+            kind = self.clock_kind(name) if k == clock else None
+            if kind:
+                ticks = pc.cast(col, pa.int64()).to_numpy()           # integer ticks: exact before scaling
+                out[:, k] = (ticks - ticks[0]) * {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[col.type.unit]
+                if kind == "time of day":
+                    out[:, k] = past_midnight(out[:, k])[0]
+                continue
             out[:, k] = col.to_numpy() if pa.types.is_float64(col.type) else col.cast(pa.float64()).to_numpy()
             bad = np.flatnonzero(~np.isfinite(out[:, k]))
             if bad.size:

@@ -394,7 +394,10 @@ class _ParquetSource(_Source):
 
     def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        data = self.table.columns([self.names[i] for i in idx])
+        data = self.table.columns([self.names[i] for i in idx], clock=clock)
+        self.clock = self.table.clock_kind(self.names[idx[clock]]) if clock is not None else None
+        if self.clock:
+            self.notes.append(f"column {labels[clock]}: clock readings ({self.clock}), read as seconds from the first row")
         return data, (lambda r: f"row {r}")
 
 
