@@ -306,7 +306,8 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
 
-    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank)
+    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank,
+                                       last=lambda key: key.endswith(".valve.rated_flow"))
     if keep:
         cal_spec = current.spec
     else:

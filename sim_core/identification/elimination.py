@@ -44,7 +44,8 @@ def strength(res: oe.FitResult, key: str, reason: str, rank: Callable[[str], int
 def eliminate(free: list[FreeParameter], first: oe.FitResult,
               judge: Callable[[oe.FitResult], dict[str, str | None]],
               refit: Callable[[list[FreeParameter], oe.FitResult], oe.FitResult],
-              rank: Callable[[str], int]) -> tuple[list[FreeParameter], oe.FitResult,
+              rank: Callable[[str], int], last: Callable[[str], bool] = lambda key: False
+              ) -> tuple[list[FreeParameter], oe.FitResult,
                                                    dict[str, tuple[str, oe.FitResult]]]:
     """Drop the parameters of ``free`` the record cannot identify (module docstring) and refit the
     rest after each drop.
@@ -64,6 +65,11 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
         if not failing:
             break
         every = not bound_only and len(failing) == len(keep)
+        if not bound_only and any(not last(fp.key) for fp in keep):
+            # the baseline parameters go only when nothing else is left (or at a range end)
+            failing = [fp for fp in failing if not last(fp.key) or verdict[fp.key].startswith("at the")]
+            if not failing:
+                break
         if every:
             failing = [min(failing, key=lambda fp: strength(current, fp.key, verdict[fp.key], rank))]
         for fp in failing:
