@@ -61,6 +61,7 @@ def run(args):
         row = next((c for c in res.get("calibration", {}).get("changes", []) if c["parameter"] == k), {})
         print(f"  {k} = {p['value']:.6g} +- {p['sigma']:.3g} (95 %: {lo:.6g} .. {hi:.6g}; was {p['initial']:.6g})"
               + ("  [at a search bound]" if p.get("at_bound") else "")
+              + (f"  [{row['note']}]" if row.get("note") else "")
               + (f"  [given {', '.join(row['conditional_on'])} at nominal]" if row.get("conditional_on") else ""))
     for k, why in res.get("calibration", {}).get("held", {}).items():
         print(f"  {k}: {why}")

@@ -25,7 +25,9 @@ calibration finding.
 After the fit each freed parameter is checked: identified when ``|value / sigma| >= 3`` and no
 correlation beyond ``CORRELATION_LIMIT`` ties it to another freed parameter (of such a pair the flow
 gain is kept: it is the baseline). A parameter that is not identified is reported as such and reset
-to its nominal value, the rest refitted (``elimination.py``: which go, and when); a misfit the calibration explains is a calibration finding
+to its nominal value, the rest refitted (``elimination.py``: which go, and when; a flow gain goes
+only when nothing else is left, and kept below ``|value / sigma| = 3`` its row says so and names the
+parameters its value is conditional on); a misfit the calibration explains is a calibration finding
 (``Calibration.changes``), not an effect.
 """
 
@@ -306,8 +308,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
 
-    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank,
-                                       last=lambda key: key.endswith(".valve.rated_flow"))
+    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank, last=is_baseline)
     if keep:
         cal_spec = current.spec
     else:
@@ -317,11 +318,23 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     final = current
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
+    # a flow gain kept as the baseline although the record does not pin it down by itself: its value
+    # carries what the parameters reset to nominal explained with it
+    weak = identifiability(final) if keep else {}
+    for c in changes:
+        if c["identified"] and is_baseline(c["parameter"]) and weak.get(c["parameter"]):
+            c["note"] = f"kept as the baseline ({weak[c['parameter']]})"
+            c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(dropped))
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
 
 BOUND_SHARE = 1e-3          # within this share of its range (in fit coordinates) of an end, a parameter is at it
+
+
+def is_baseline(key: str) -> bool:
+    """A valve flow gain: the baseline every joint's speed scales with, kept while anything else can go."""
+    return key.endswith(".valve.rated_flow")
 
 
 def at_bound(fp: FreeParameter, value: float) -> str | None:
@@ -434,7 +447,8 @@ def format_changes(changes: list[dict]) -> list[str]:
     """One line per freed parameter, for ``fit`` and the log."""
     lines = []
     for c in changes:
-        state = "identified" if c["identified"] else f"NOT identified ({c.get('not_identified_because')}), kept at nominal"
+        state = (("identified" + (f", {c['note']}" if c.get("note") else "")) if c["identified"]
+                 else f"NOT identified ({c.get('not_identified_because')}), kept at nominal")
         lines.append(f"  {c['parameter']}: nominal {c['nominal']:.6g}, fitted {c['fitted']:.6g} +- {c['sigma']:.3g} "
                      f"{c['unit']}".rstrip() + f": {state}" + (f"  [{c['why']}]" if c.get("why") else ""))
     return lines

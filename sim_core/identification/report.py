@@ -437,7 +437,8 @@ def _calibration_html(data: dict) -> str:
              "<table><tr><th>parameter</th><th>nominal</th><th>fitted</th><th>sigma</th><th>identified</th><th>used</th>"
              "<th>why freed</th></tr>"]
     for c in cal.get("changes", []):
-        ident = "yes" if c["identified"] else f"no: {c.get('not_identified_because', '')}"
+        ident = (("yes" + (f" ({c['note']})" if c.get("note") else "")) if c["identified"]
+                 else f"no: {c.get('not_identified_because', '')}")
         parts.append(f"<tr><td>{e(c['parameter'])}</td><td>{_fmt(c['nominal'])}</td><td>{_fmt(c['fitted'])}</td>"
                      f"<td>{_fmt(c['sigma'])}</td><td class='{'ok' if c['identified'] else 'bad'}'>{e(ident)}</td>"
                      f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}"
