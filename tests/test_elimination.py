@@ -171,3 +171,15 @@ def test_the_flow_gain_goes_only_when_nothing_else_is_left_to_go():
     only = _scripted([flow], {FLOW: 2e-4}, {FLOW: 2e-4 / 0.5})
     keep, _, dropped = eliminate([flow], only, identifiability, lambda k, c: None, keep_rank, last=_is_flow)
     assert keep == [] and list(dropped) == [FLOW]
+
+
+def test_a_flow_gain_kept_below_three_sigma_says_so_and_what_it_carries():
+    from sim_core.identification.calibration import mark_baseline
+
+    rows = [{"parameter": FLOW, "identified": True}, {"parameter": MASS, "identified": True},
+            {"parameter": GAIN, "identified": False, "not_identified_because": "|value/sigma| = 0.8 < 3"}]
+    mark_baseline(rows, {FLOW: "|value/sigma| = 1.2 < 3", MASS: "|value/sigma| = 2 < 3"}, [GAIN])
+    assert rows[0]["note"] == "kept as the baseline (|value/sigma| = 1.2 < 3)" and rows[0]["conditional_on"] == [GAIN]
+    assert "note" not in rows[1] and "note" not in rows[2]          # only the baseline, only when weak
+    rows = [{"parameter": FLOW, "identified": True}]
+    assert "note" not in mark_baseline(rows, {FLOW: None}, [GAIN])[0]

@@ -318,13 +318,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     final = current
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
-    # a flow gain kept as the baseline although the record does not pin it down by itself: its value
-    # carries what the parameters reset to nominal explained with it
-    weak = identifiability(final) if keep else {}
-    for c in changes:
-        if c["identified"] and is_baseline(c["parameter"]) and weak.get(c["parameter"]):
-            c["note"] = f"kept as the baseline ({weak[c['parameter']]})"
-            c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(dropped))
+    mark_baseline(changes, identifiability(final) if keep else {}, list(dropped))
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
@@ -399,6 +393,17 @@ def mark_conditional(changes: list[dict]) -> list[dict]:
             reason = other.get("not_identified_because") or ""
             if reason.startswith("correlation") and reason.endswith(tail):
                 c.setdefault("conditional_on", []).append(other["parameter"])
+    return changes
+
+
+def mark_baseline(changes: list[dict], verdict: dict[str, str | None], dropped: list[str]) -> list[dict]:
+    """A flow gain kept as the baseline although the final fit does not pin it down by itself
+    (``verdict``: identifiability of that fit): its row says so (``note``), and that its value
+    carries what the parameters reset to nominal (``dropped``) explained with it (``conditional_on``)."""
+    for c in changes:
+        if c["identified"] and is_baseline(c["parameter"]) and verdict.get(c["parameter"]):
+            c["note"] = f"kept as the baseline ({verdict[c['parameter']]})"
+            c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(dropped))
     return changes
 
 
