@@ -19,7 +19,7 @@ Not one at a time to the end: in a closed-loop record without pressures a parame
 apart (a flow gain and a supply pressure or a sensor gain); kept, it is then identified and carries
 what the two explain together, and the effects named afterwards inherit its error (measured on a
 hanging cylinder's 4 % leak, seeds 1-2: 22-23 % low with one-at-a-time elimination, 9 % low with
-this rule; README, "Diagnose your own rig").
+this rule before the flow gain went last, 2-3 % since; README, "Diagnose your own rig").
 
 ``identifiability`` (calibration) says why a parameter is not identified; this module only decides
 which of them go, and when.
@@ -50,8 +50,7 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
               judge: Callable[[oe.FitResult], dict[str, str | None]],
               refit: Callable[[list[FreeParameter], oe.FitResult], oe.FitResult],
               rank: Callable[[str], int], last: Callable[[str], bool] = lambda key: False
-              ) -> tuple[list[FreeParameter], oe.FitResult,
-                                                   dict[str, tuple[str, oe.FitResult]]]:
+              ) -> tuple[list[FreeParameter], oe.FitResult, dict[str, tuple[str, oe.FitResult]]]:
     """Drop the parameters of ``free`` the record cannot identify (module docstring) and refit the
     rest after each drop.
 
@@ -59,7 +58,7 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
     one at an end of its range). ``refit(keep, current)``: the fit of ``keep`` with the dropped
     parameters at nominal, started from ``current``'s values. Returns the kept parameters, the last
     fit (the one the last parameter was dropped on when none is kept) and, per dropped key, why and
-    the fit it was judged on."""
+    the fit it was judged on. ``last(key)``: a baseline parameter (module docstring)."""
     keep, current = list(free), first
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
     bound_only = False          # after a drop beside identified parameters only one pushed to an end goes
