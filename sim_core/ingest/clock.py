@@ -20,12 +20,8 @@ DAY_S = 86400.0
 
 def kind(cell: str) -> str | None:
     """'date and time', 'time of day', or None when ``cell`` is neither."""
-    s = cell.strip().strip('"')
-    if TIME_OF_DAY.match(s):
-        return "time of day" if _parts(s) is not None else None
-    if DATE_TIME.match(s):
-        return "date and time" if _parts(s) is not None else None
-    return None
+    r = reading(cell)
+    return None if r is None else r[0]
 
 
 def seconds(cell: str, since: int = 0) -> float | None:
@@ -33,17 +29,19 @@ def seconds(cell: str, since: int = 0) -> float | None:
     before the fraction is added, so that a date and time keeps its microseconds in float64): since
     midnight for a time of day, since 1970-01-01 for a date and time (in its zone's UTC when it gives
     one, else as written); None when ``cell`` is not one."""
-    parts = _parts(cell)
-    return None if parts is None else (parts[0] - since) + parts[1]
+    r = reading(cell)
+    return None if r is None else (r[1] - since) + r[2]
 
 
 def whole_seconds(cell: str) -> int | None:
     """The whole seconds of a clock reading (``seconds``' scale), None when ``cell`` is not one."""
-    parts = _parts(cell)
-    return None if parts is None else parts[0]
+    r = reading(cell)
+    return None if r is None else r[1]
 
 
-def _parts(cell: str) -> tuple[int, float] | None:
+def reading(cell: str) -> tuple[str, int, float] | None:
+    """(kind, whole seconds, fraction of a second) of a clock reading, parsed once; None when
+    ``cell`` is not one (``seconds`` says on which scale)."""
     s = cell.strip().strip('"')
     m = TIME_OF_DAY.match(s)
     if m:
@@ -51,7 +49,7 @@ def _parts(cell: str) -> tuple[int, float] | None:
         whole, _, frac = sec.partition(".")
         if h > 23 or mi > 59 or int(whole) > 60:
             return None
-        return h * 3600 + mi * 60 + int(whole), float("0." + frac) if frac else 0.0
+        return "time of day", h * 3600 + mi * 60 + int(whole), float("0." + frac) if frac else 0.0
     if not DATE_TIME.match(s):
         return None
     frac = re.search(r"[.,](\d+)", s[10:])
@@ -63,7 +61,7 @@ def _parts(cell: str) -> tuple[int, float] | None:
     if dt.tzinfo is not None:
         dt = dt.astimezone(timezone.utc).replace(tzinfo=None)
     delta = dt - _EPOCH
-    return delta.days * 86400 + delta.seconds, float("0." + frac.group(1)) if frac else 0.0
+    return "date and time", delta.days * 86400 + delta.seconds, float("0." + frac.group(1)) if frac else 0.0
 
 
 def past_midnight(t: np.ndarray) -> tuple[np.ndarray, int]:
@@ -72,7 +70,6 @@ def past_midnight(t: np.ndarray) -> tuple[np.ndarray, int]:
     back = np.flatnonzero(np.diff(t) < -DAY_S / 2)
     if back.size == 0:
         return t, 0
-    days = np.zeros(t.size)
-    for i in back:
-        days[i + 1:] += DAY_S
-    return t + days, int(back.size)
+    step = np.zeros(t.size)
+    step[back + 1] = DAY_S
+    return t + np.cumsum(step), int(back.size)

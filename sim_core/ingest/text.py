@@ -331,12 +331,12 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
         for k, c in enumerate(indices):
             cell = cells[c]
             if clock is not None and k == clock[0]:
-                v = clock_readings.seconds(cell, clock[2]) if clock_readings.kind(cell) == clock[1] else None
-                if v is None:
+                r = clock_readings.reading(cell)
+                if r is None or r[0] != clock[1]:
                     what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a {clock[1]}"
                     raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}, where the first row "
                                  f"holds a {clock[1]} (the column is read as clock readings)")
-                cols[k].append(v)
+                cols[k].append((r[1] - clock[2]) + r[2])
                 continue
             try:
                 v = _to_float(cell, layout.decimal)
