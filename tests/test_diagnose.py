@@ -68,7 +68,7 @@ def test_hidden_effect_is_found(cli, case, tmp_path, artifacts):
     top = d["selected"][0]
     assert (top["effect"], top["joint"]) == (name, joint), d["selected"]
     for p in case.hidden[0][2]:
-        assert top["params"][p] == pytest.approx(vals[p], rel=0.10), (p, top["params"], vals)
+        assert top["params"][p] == pytest.approx(vals[p], rel=0.10, abs=0), (p, top["params"], vals)
     assert top["gain"] >= THRESHOLD_POINTS
     # the fit of the diagnosed joint improves on the validation data
     assert d["extended"]["fit"][case.joint] > d["baseline"]["fit"][case.joint]
@@ -93,7 +93,7 @@ def test_two_hidden_effects_are_both_named(cli, case, tmp_path, artifacts):
         assert (name, joint) in named, d["selected"]
         for p, v in vals.items():
             if p in named[(name, joint)]["params"]:
-                assert named[(name, joint)]["params"][p] == pytest.approx(v, rel=0.10)
+                assert named[(name, joint)]["params"][p] == pytest.approx(v, rel=0.10, abs=0)
     assert len(d["selected"]) == len(truth)
 
 

@@ -161,6 +161,6 @@ def test_reported_numbers_keep_six_significant_digits():
     1e-13 m^3/(s Pa) is not rounded to 0, and large numbers are not padded with false digits."""
     from sim_core.identification.diagnosis import _num
 
-    assert _num(3.21e-13) == pytest.approx(3.21e-13, rel=1e-6)
+    assert _num(3.21e-13) == pytest.approx(3.21e-13, rel=1e-6, abs=0)
     assert _num(1234567.891) == 1234570.0
     assert _num(float("nan")) is None and _num(None) is None

@@ -41,7 +41,7 @@ def run(args):
     import sys
 
     from ..effects import EFFECTS
-    from ..identification import diagnosis, report
+    from ..identification import conditional, diagnosis, report
     from ..identification.record import load_record
     from ..ingest import options_from_args
     from . import CliError
@@ -83,6 +83,8 @@ def run(args):
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
         flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
+        for line in conditional.describe(s):
+            print(f"    {line}")
     for why in (d.unexplained or {}).get("because", []):
         print(f"  unexplained: {why}")
     for cause in (d.unexplained or {}).get("record_causes", []):

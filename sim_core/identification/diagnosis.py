@@ -26,11 +26,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import output_error as oe
-from . import command_null, polarity
+from . import command_null, conditional, polarity
 from .calibration import calibrate, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
-from .decision import FAR_POINTS, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
+from .decision import FAR_POINTS, SIGNIFICANCE, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter
 from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
@@ -316,6 +316,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if again is not None:          # a pair passed where the search had stopped for a dropped effect
             sel.accepted = again[0]
             chosen, final = checked(*again)
+        # what the named effects' values take for granted: the calibration's parameters left at nominal
+        held = [fp for fp in pl.free if final is not None and fp.key not in final.values
+                and any(c["parameter"] == fp.key and not c["identified"] for c in cal.changes)]
+        hanging = conditional.elasticities(final, held, accurate, est, side) if held else {}
     ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]
@@ -333,6 +337,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         c = ev.candidate
         params = {}
         ci = {}
+        # of the values that are measured (a parameter of no significance has nothing to correct)
+        elasticity = {fp.key.split(".")[-1]: {k: round(e, 3) for k, e in hanging.get(fp.key, {}).items()}
+                      for fp in c.free if hanging.get(fp.key) and abs(ev.significance.get(fp.key, 0.0)) >= SIGNIFICANCE}
         for fp in c.free:
             name = fp.key.split(".")[-1]
             v = final.values[fp.key] if final is not None else ev.values[fp.key]
@@ -345,6 +352,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
                 "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
                 "refit_of_nominal": c.existing, "round": ev.round}
+        if elasticity:
+            item["elasticity_to_held"] = elasticity
+            item["conditional_on"] = sorted({k for row in elasticity.values() for k in conditional.conditional_on(row)})
         if ev.pair is None:
             item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures))
         else:

@@ -187,6 +187,7 @@ class FitResult:
     x: np.ndarray | None = None       # optimum in the normalised coordinates
     residual: np.ndarray | None = None
     start_spec: object = None         # the spec the free values are applied to
+    jacobian: np.ndarray | None = None   # d residual / d x at the optimum (add_uncertainty's)
 
     def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
         """'lower'/'upper' when the estimate sits on a search bound, else None."""
@@ -404,6 +405,7 @@ def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
     outs = _simulate_all(runner, specs, problem.n, side)
     for i, (h, o) in enumerate(zip(steps, outs)):
         J[:, i] = (problem.residuals(o) - r0) / h
+    out.jacobian = J
     m = r0.size
     dof = max(m - k, 1)
     s2 = float(r0 @ r0) / dof

@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import background_import
 from ..effects import EFFECTS
+from . import conditional
 from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
@@ -306,6 +307,8 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                        f"<td>{_fmt(s['significance'].get(k))}</td></tr>" for k, v in s["params"].items())
         parts.append("<table><tr><th>parameter</th><th>estimate</th><th>95 % interval</th><th>|est - none| / sigma</th></tr>"
                      f"{rows}</table>")
+        for line in conditional.describe(s):
+            parts.append(f"<p><b>Conditional</b>: {e(line)}.</p>")
         gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
         parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b>{_share(s)} ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
                      f"BIC change {_fmt(s['bic_delta'])}." + (" Refit of an effect the nominal model already has." if s["refit_of_nominal"] else "") + "</p>")
@@ -532,6 +535,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
         for k, v in s["params"].items():
             lo, hi = s["ci95"][k]
             lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
+        lines += [f"- {line}" for line in conditional.describe(s)]
         lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
         if "named_together_with" in s:
             o = s["named_together_with"]

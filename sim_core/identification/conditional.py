@@ -1,0 +1,77 @@
+"""What a fitted value takes for granted: the parameters held at their nominal values.
+
+A parameter the calibration could not identify (a rig's supply pressure, logged without pressures)
+stays nominal, and what a different value of it would explain is carried by the parameters fitted
+beside it. The record fixes a leak's flow, coefficient times pressure drop, so a leak fitted with
+the supply 18 % high comes out about 15 % low: the coefficient is conditional on the supply.
+
+Linearised at the optimum, the fitted values follow a held parameter so that the normal equations
+stay satisfied: ``dx_f = -(J_f' J_f)^-1 J_f' J_h dx_h`` (every fitted parameter, the calibration's
+included, moves with it). The elasticity, percent of the value per percent of the held parameter,
+says how far a value hangs on each held one; a user who reads the held value off a gauge later can
+correct the value without refitting: ``v * (h_true / h_nominal) ** elasticity``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .output_error import FitResult, _simulate_all
+from .parameters import FreeParameter
+
+# a value that moves by less than 0.2 % per percent of a held parameter does not depend on it for
+# practical purposes: a held value 30 % off (the far end of a rig's spec) then moves it less than 6 %
+ELASTICITY_LIMIT = 0.2
+STEP_REL = 2e-3         # the held parameter's forward step, relative to its value
+
+
+def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, side=None) -> dict[str, dict[str, float]]:
+    """Per fitted key of ``fit``: {held key: elasticity (% per %)} for each held parameter whose value
+    is not zero (an offset held at zero has no percent), from one simulation per held parameter (the
+    fitted values' columns are ``fit``'s own Jacobian, taken where its uncertainty was).
+    Empty when ``fit`` has no Jacobian (fitted without uncertainty) or nothing is held."""
+    J_f = fit.jacobian
+    held = [h for h in held if h.key not in fit.values and h.get(fit.spec) != 0.0]
+    if J_f is None or fit.residual is None or not held or not fit.free:
+        return {}
+    specs = []
+    for h in held:
+        s = fit.spec.copy()
+        h.apply(s, h.get(fit.spec) * (1.0 + STEP_REL))
+        specs.append(s)
+    fit.sims += len(specs)
+    outs = _simulate_all(runner, specs, problem.n, side)
+    kept = [(h, o) for h, o in zip(held, outs) if o.ok]      # a step the model cannot take says nothing
+    if not kept:
+        return {}
+    held = [h for h, _ in kept]
+    # columns per unit of log(h): the residual's change for a relative change of the held value
+    J_h = np.column_stack([(problem.residuals(o) - fit.residual) / math.log1p(STEP_REL) for _, o in kept])
+    S = -np.linalg.lstsq(J_f, J_h, rcond=None)[0]          # dx_f / dlog(h)
+    out: dict[str, dict[str, float]] = {}
+    for i, fp in enumerate(fit.free):
+        v = fit.values[fp.key]
+        if v == 0.0:
+            continue
+        row = {h.key: float(fp.dv_dx(v) * S[i, j] / v) for j, h in enumerate(held)}
+        out[fp.key] = {k: e for k, e in row.items() if math.isfinite(e)}
+    return out
+
+
+def conditional_on(rows: dict[str, float]) -> list[str]:
+    """The held parameters a value depends on (|elasticity| >= ELASTICITY_LIMIT), in key order."""
+    return sorted(k for k, e in rows.items() if abs(e) >= ELASTICITY_LIMIT)
+
+
+def describe(named: dict) -> list[str]:
+    """One line per value of a named effect (a ``selected`` item of the diagnosis) that hangs on a
+    held parameter: which, how much, and the correction once its true value is known."""
+    lines = []
+    for param, row in named.get("elasticity_to_held", {}).items():
+        for key in conditional_on(row):
+            e = row[key]
+            lines.append(f"{param} is conditional on {key} held at nominal: {e:+.2f} % per % of it "
+                         f"(with its true value, {param} x (true / nominal) ^ {e:.2f})")
+    return lines

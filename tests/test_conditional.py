@@ -1,0 +1,89 @@
+"""What a fitted value takes for granted (identification/conditional.py), on a model whose answer is
+known in closed form, no simulation: a leak-like flow ``C p u(t)`` whose record fixes only the
+product of the fitted coefficient C and the held pressure p, beside a term ``b w(t)`` that p does not
+touch. Fitted by the same output-error fit as the diagnosis (scipy least squares, its Jacobian)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sim_core.identification import output_error as oe
+from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, elasticities
+from sim_core.identification.parameters import FreeParameter
+
+C, B, P, Z = "leak.coefficient", "drive.gain", "supply.pressure", "sensor.offset"
+
+
+class Spec(dict):
+    def get(self, key):
+        return self[key]
+
+    def set(self, key, value):
+        self[key] = value
+
+    def copy(self):
+        return Spec(self)
+
+
+class Out:
+    def __init__(self, y):
+        self.y, self.ok = y, True
+
+
+class Model:
+    """y = C p u(t) + b w(t) + z (a sensor offset, held at zero); the record made with p_true."""
+
+    def __init__(self, n=400, seed=2, p_true=0.85e7, c_true=2e-7, b_true=1.5):
+        rng = np.random.default_rng(seed)
+        self.u, self.w = rng.standard_normal(n), np.sin(np.linspace(0.0, 20.0, n))
+        self.n = self.size = n
+        self.y = c_true * p_true * self.u + b_true * self.w + 1e-4 * rng.standard_normal(n)
+        self.meas = {("j", "angle"): self.y}
+
+    # the runner
+    def simulate(self, spec, n, owned=False):
+        return Out(spec[C] * spec[P] * self.u + spec[B] * self.w + spec[Z])
+
+    # the problem
+    def residuals(self, out):
+        return out.y - self.y
+
+
+def _fit(model, spec):
+    free = [FreeParameter(C, 1e-9, 1e-5, log=True), FreeParameter(B, 0.1, 10.0)]
+    return oe.fit(model, model, spec, free, max_sims=80, tol=1e-10)
+
+
+def test_a_coefficient_fixed_only_as_a_product_with_a_held_pressure_goes_as_its_inverse():
+    """C p is what the record fixes: with p held 1/0.85 too high, C comes out 15 % low, and its
+    elasticity to p is -1 (the exact answer); b, which p does not touch, does not depend on it, nor
+    does anything on a held parameter whose value is zero (no percent to speak of)."""
+    model = Model()
+    spec = Spec({C: 1e-7, B: 1.0, P: 1e7, Z: 0.0})
+    held = [FreeParameter(P, 5e6, 2e7), FreeParameter(Z, -1.0, 1.0)]
+    fit = _fit(model, spec)
+    assert fit.values[C] == pytest.approx(2e-7 * 0.85, rel=1e-3, abs=0)
+    e = elasticities(fit, held, model, model)
+    assert e[C][P] == pytest.approx(-1.0, abs=1e-2)
+    assert abs(e[B][P]) < 1e-2
+    assert Z not in e[C] and Z not in e[B]
+    assert conditional_on(e[C]) == [P] and conditional_on(e[B]) == []
+    # the correction the elasticity offers, with the pressure read off a gauge later
+    assert fit.values[C] * 0.85 ** e[C][P] == pytest.approx(2e-7, rel=2e-3, abs=0)
+
+
+def test_a_held_parameter_that_is_fitted_is_not_held_and_a_fit_without_jacobian_says_nothing():
+    model = Model()
+    spec = Spec({C: 1e-7, B: 1.0, P: 1e7, Z: 0.0})
+    fit = _fit(model, spec)
+    assert elasticities(fit, [FreeParameter(B, 0.1, 10.0)], model, model) == {}
+    bare = oe.fit(model, model, spec, fit.free, max_sims=80, tol=1e-10, uncertainty=False)
+    assert bare.jacobian is None
+    assert elasticities(bare, [FreeParameter(P, 5e6, 2e7)], model, model) == {}
+
+
+def test_the_limit_separates_what_matters():
+    assert conditional_on({P: -ELASTICITY_LIMIT, Z: 0.5 * ELASTICITY_LIMIT, B: math.nan}) == [P]
