@@ -35,6 +35,7 @@ def register(sub):
 def run(args):
     import json
 
+    from ..identification import conditional
     from ..identification.fitting import run_fit
     from ..identification.record import load_record
     from ..ingest import options_from_args
@@ -62,7 +63,7 @@ def run(args):
         print(f"  {k} = {p['value']:.6g} +- {p['sigma']:.3g} (95 %: {lo:.6g} .. {hi:.6g}; was {p['initial']:.6g})"
               + ("  [at a search bound]" if p.get("at_bound") else "")
               + (f"  [{row['note']}]" if row.get("note") else "")
-              + (f"  [given {', '.join(row['conditional_on'])} at nominal]" if row.get("conditional_on") else ""))
+              + (f"  [{conditional.given(row)}]" if row.get("conditional_on") else ""))
     for k, why in res.get("calibration", {}).get("held", {}).items():
         print(f"  {k}: {why}")
     for where, fits in res["fit"].items():

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import conditional
 from . import output_error as oe
 from .elimination import eliminate
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
@@ -319,6 +320,9 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
     mark_baseline(changes, identifiability(final) if keep else {}, list(dropped))
+    if keep and dropped:
+        mark_elasticities(changes, conditional.elasticities(final, [fp for fp in free if fp.key in dropped],
+                                                            runner, problem))
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
@@ -404,6 +408,18 @@ def mark_baseline(changes: list[dict], verdict: dict[str, str | None], dropped: 
         if c["identified"] and is_baseline(c["parameter"]) and verdict.get(c["parameter"]):
             c["note"] = f"kept as the baseline ({verdict[c['parameter']]})"
             c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(dropped))
+    return changes
+
+
+def mark_elasticities(changes: list[dict], rows: dict[str, dict[str, float]]) -> list[dict]:
+    """An identified parameter's row says how far its value hangs on each one reset to nominal
+    (``elasticity_to_held``, conditional.py), and ``conditional_on`` gains those it depends on."""
+    for c in changes:
+        e = rows.get(c["parameter"])
+        if c["identified"] and e:
+            c["elasticity_to_held"] = {k: round(v, 3) for k, v in e.items()}
+            if conditional.conditional_on(e):
+                c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(conditional.conditional_on(e)))
     return changes
 
 

@@ -75,3 +75,13 @@ def describe(named: dict) -> list[str]:
             lines.append(f"{param} is conditional on {key} held at nominal: {e:+.2f} % per % of it "
                          f"(with its true value, {param} x (true / nominal) ^ {e:.2f})")
     return lines
+
+
+def given(row: dict) -> str:
+    """'given K1 (e1 % per %), K2 at nominal' for a calibration row's ``conditional_on``, with the
+    elasticity where the row has one; empty when it depends on nothing held."""
+    if not row.get("conditional_on"):
+        return ""
+    e = row.get("elasticity_to_held") or {}
+    held = [f"{k} ({e[k]:+.2f} % per %)" if k in e else k for k in row["conditional_on"]]
+    return f"given {', '.join(held)} at nominal"

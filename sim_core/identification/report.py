@@ -445,7 +445,7 @@ def _calibration_html(data: dict) -> str:
         parts.append(f"<tr><td>{e(c['parameter'])}</td><td>{_fmt(c['nominal'])}</td><td>{_fmt(c['fitted'])}</td>"
                      f"<td>{_fmt(c['sigma'])}</td><td class='{'ok' if c['identified'] else 'bad'}'>{e(ident)}</td>"
                      f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}"
-                     + (f" (given {e(', '.join(c['conditional_on']))} at nominal)" if c.get("conditional_on") else "")
+                     + (f" ({e(conditional.given(c))})" if c.get("conditional_on") else "")
                      + f"</td><td>{e(c.get('why', ''))}</td></tr>")
     parts.append("</table>")
     if cal.get("held"):
@@ -549,7 +549,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
     lines += ["| calibrated | nominal | fitted | sigma | identified |", "|---|---|---|---|---|"]
     for c in data["calibration"].get("changes", []):
         lines.append(f"| {c['parameter']} | {_fmt(c['nominal'])} | {_fmt(c['fitted'])} | {_fmt(c['sigma'])} | "
-                     f"{'yes' if c['identified'] else 'no (kept nominal)'} |")
+                     f"{('yes' + (f', {conditional.given(c)}' if c.get('conditional_on') else '')) if c['identified'] else 'no (kept nominal)'} |")
     lines.append("")
     lines.append("| joint | baseline fit | extended fit |")
     lines.append("|---|---|---|")
