@@ -395,7 +395,7 @@ def mark_conditional(changes: list[dict]) -> list[dict]:
         tail = f"with {c['parameter']}: the record cannot tell them apart"
         for other in changes:
             reason = other.get("not_identified_because") or ""
-            if reason.startswith("correlation") and reason.endswith(tail):
+            if reason.startswith("correlation") and reason.endswith(tail) and other["parameter"] not in c.get("conditional_on", []):
                 c.setdefault("conditional_on", []).append(other["parameter"])
     return changes
 

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import output_error as oe
-from .calibration import identifiability, mark_conditional, plan, scan_flow_gains
+from . import conditional
+from .calibration import identifiability, mark_conditional, mark_elasticities, plan, scan_flow_gains
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
@@ -148,7 +149,14 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             row["not_identified_because"] = verdict[k]
             result["parameters"][k]["not_identified_because"] = verdict[k]
         changes.append(row)
-    result["calibration"] = {"changes": mark_conditional(changes), "held": held}
+    mark_conditional(changes)
+    reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
+    if reset_keys and final.free:
+        mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob))
+        for row in changes:
+            if "elasticity_to_held" in row:
+                result["parameters"][row["parameter"]]["elasticity_to_held"] = row["elasticity_to_held"]
+    result["calibration"] = {"changes": changes, "held": held}
     if out:
         configured = spec.copy()
         for k in keys:
