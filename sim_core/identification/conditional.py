@@ -73,7 +73,7 @@ def describe(named: dict) -> list[str]:
         for key in conditional_on(row):
             e = row[key]
             lines.append(f"{param} is conditional on {key} held at nominal: {e:+.2f} % per % of it "
-                         f"(with its true value, about {param} x (true / nominal) ^ {e:.2f}; exactly: that "
+                         f"(with its true value, about {param} x (true / nominal) ^ {e:.2f}; without the linearisation: that "
                          f"value in the robot's spec and the record diagnosed again)")
     return lines
 
