@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sim_core.identification import output_error as oe
-from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, elasticities
+from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, describe, elasticities, given
 from sim_core.identification.parameters import FreeParameter
 
 C, B, P, Z = "leak.coefficient", "drive.gain", "supply.pressure", "sensor.offset"
@@ -87,3 +87,8 @@ def test_a_held_parameter_that_is_fitted_is_not_held_and_a_fit_without_jacobian_
 
 def test_the_limit_separates_what_matters():
     assert conditional_on({P: -ELASTICITY_LIMIT, Z: 0.5 * ELASTICITY_LIMIT, B: math.nan}) == [P]
+    lines = describe({"elasticity_to_held": {"internal": {P: -1.29, Z: 0.1}}})
+    assert len(lines) == 1 and P in lines[0] and "-1.29" in lines[0]
+    assert given({"conditional_on": [P, Z], "elasticity_to_held": {P: 0.98}}) == \
+        f"given {P} (+0.98 % per %), {Z} at nominal"
+    assert given({"elasticity_to_held": {P: 0.98}}) == ""
