@@ -67,6 +67,7 @@ sys.path.insert(0, str(ROOT / "tests"))     # the rig record generator the tests
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.effects import EFFECTS  # noqa: E402
+from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
 from sim_core.identification.metrics import noise_std  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
@@ -496,9 +497,7 @@ def calibration_finding(d: dict, case: dict, joint: str) -> dict | None:
     if truth and ch.get("elasticity_to_held"):
         # the value corrected with its elasticities to what was held at nominal, given the truth's
         # values of those (a figure beside the score, not the score)
-        corrected = fitted
-        for k, e in ch["elasticity_to_held"].items():
-            corrected *= rig_off(joint).get(k, 1.0) ** e
+        corrected = conditional.corrected(fitted, ch["elasticity_to_held"], rig_off(joint))
         out["error_given_true_held_pct"] = round(100 * abs(corrected / truth - 1.0), 2)
     return out
 

@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
 
 from rig_records import closed_loop_record, logged_like_a_daq, write_headerless  # noqa: E402
 
+from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
 
@@ -106,10 +107,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
             # the truth's values of those (the bench's factors; the rest of the truth is nominal)
             held = (hit[0].get("elasticity_to_held") or {}).get(key)
             if held:
-                value = hit[0]["params"][key]
-                for k, e in held.items():
-                    value *= off.get(k, 1.0) ** e
-                corrected = value / params[key] - 1.0
+                corrected = conditional.corrected(hit[0]["params"][key], held, off) / params[key] - 1.0
         right = named == [effect] and error is not None and abs(error) <= TOLERANCE
     else:
         right = d["verdict"] == "no_significant_discrepancy"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sim_core.identification import output_error as oe
-from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, describe, elasticities, given
+from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, corrected, describe, elasticities, given
 from sim_core.identification.parameters import FreeParameter
 
 C, B, P, Z = "leak.coefficient", "drive.gain", "supply.pressure", "sensor.offset"
@@ -73,6 +73,8 @@ def test_a_coefficient_fixed_only_as_a_product_with_a_held_pressure_goes_as_its_
     assert conditional_on(e[C]) == [P] and conditional_on(e[B]) == []
     # the correction the elasticity offers, with the pressure read off a gauge later
     assert fit.values[C] * 0.85 ** e[C][P] == pytest.approx(2e-7, rel=2e-3, abs=0)
+    assert corrected(fit.values[C], e[C], {P: 0.85}) == pytest.approx(2e-7, rel=2e-3, abs=0)
+    assert corrected(fit.values[B], e[B], {P: 0.85}) == pytest.approx(fit.values[B], rel=1e-3, abs=0)
 
 
 def test_a_held_parameter_that_is_fitted_is_not_held_and_a_fit_without_jacobian_says_nothing():

@@ -418,8 +418,9 @@ def mark_elasticities(changes: list[dict], rows: dict[str, dict[str, float]]) ->
         e = rows.get(c["parameter"])
         if c["identified"] and e:
             c["elasticity_to_held"] = {k: round(v, 3) for k, v in e.items()}
-            if conditional.conditional_on(e):
-                c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(conditional.conditional_on(e)))
+            depends = conditional.conditional_on(e)
+            if depends:
+                c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(depends))
     return changes
 
 

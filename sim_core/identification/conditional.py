@@ -60,6 +60,14 @@ def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, sid
     return out
 
 
+def corrected(value: float, elasticity: dict[str, float], true_over_nominal: dict[str, float]) -> float:
+    """``value`` corrected to the true values of the held parameters (each given as true / nominal;
+    one not given is taken as right), to first order: ``value * prod (true / nominal) ** e``."""
+    for key, e in elasticity.items():
+        value *= true_over_nominal.get(key, 1.0) ** e
+    return value
+
+
 def conditional_on(rows: dict[str, float]) -> list[str]:
     """The held parameters a value depends on (|elasticity| >= ELASTICITY_LIMIT), in key order."""
     return sorted(k for k, e in rows.items() if abs(e) >= ELASTICITY_LIMIT)

@@ -319,9 +319,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             sel.accepted = again[0]
             chosen, final = checked(*again)
         # what the named effects' values take for granted: the calibration's parameters left at nominal
-        held = [fp for fp in pl.free if final is not None and fp.key not in final.values
-                and any(c["parameter"] == fp.key and not c["identified"] for c in cal.changes)]
-        hanging = conditional.elasticities(final, held, accurate, est, side) if held else {}
+        reset = {c["parameter"] for c in cal.changes if not c["identified"]}
+        hanging = {} if final is None else conditional.elasticities(
+            final, [fp for fp in pl.free if fp.key in reset], accurate, est, side)
     ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]

@@ -30,7 +30,12 @@ def seconds(cell: str, since: int = 0) -> float | None:
     midnight for a time of day, since 1970-01-01 for a date and time (in its zone's UTC when it gives
     one, else as written); None when ``cell`` is not one."""
     r = reading(cell)
-    return None if r is None else (r[1] - since) + r[2]
+    return None if r is None else seconds_of(r, since)
+
+
+def seconds_of(r: tuple[str, int, float], since: int = 0) -> float:
+    """``seconds`` of a ``reading``: whole seconds since ``since`` first, then the fraction."""
+    return (r[1] - since) + r[2]
 
 
 def whole_seconds(cell: str) -> int | None:

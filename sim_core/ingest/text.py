@@ -336,7 +336,7 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
                     what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a {clock[1]}"
                     raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}, where the first row "
                                  f"holds a {clock[1]} (the column is read as clock readings)")
-                cols[k].append((r[1] - clock[2]) + r[2])
+                cols[k].append(clock_readings.seconds_of(r, clock[2]))
                 continue
             try:
                 v = _to_float(cell, layout.decimal)
