@@ -75,7 +75,7 @@ def test_schemathesis_finds_no_server_errors(tmp_path):
     try:
         proc = subprocess.run(
             [str(ROOT / ".venv" / "bin" / "schemathesis") if (ROOT / ".venv" / "bin" / "schemathesis").exists() else "schemathesis",
-             "run", f"{s.url}/openapi.json", "--checks", "not_a_server_error", "--max-time", "90", "--workers", "1",
+             "run", f"{s.url}/openapi.json", "--checks", "not_a_server_error", "--max-time", "45", "--workers", "1",
              "--phases", "examples,coverage,fuzzing", "--suppress-health-check", "all"],
             capture_output=True, text=True, timeout=600, cwd=tmp_path)
         assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
