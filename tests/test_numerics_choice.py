@@ -2,11 +2,16 @@
 angles but not the chamber pressures (end-stop contact at a coarse step) is not chosen, and a step
 that diverges is reported as such."""
 
-import numpy as np
+import json
+import math
 
-from sim_core.dataset import Dataset
+import numpy as np
+import pytest
+
+from sim_core.dataset import Dataset, read_csv, write_csv
 from sim_core.excitation import multilevel_prbs
 from sim_core.identification.record import record_from_dataset
+from sim_core.identification.selection import THRESHOLD_POINTS
 from sim_core.identification.simulation import (ANGLE_TOLERANCE, PRESSURE_TOLERANCE, Outputs, choose_numerics,
                                                 close_enough, compare_outputs, model_spec)
 from sim_core.model.spec import load_robot
@@ -58,3 +63,31 @@ def test_a_step_that_fails_a_channel_on_the_record_is_not_chosen():
     assert chosen is None or (close_enough(chosen) and "pressure_fit" in chosen)
     _, no_p = choose_numerics(m, _record(spec, pressures=False))
     assert all("pressure_fit" not in c for c in no_p["candidates"].values())
+
+
+def test_a_calibrated_model_that_diverges_at_the_nominal_models_step_gets_a_finer_one(cli, tmp_path):
+    """The fast step is chosen on the nominal model before the calibration. On this record (shoulder
+    and elbow driven together, the elbow in its end stops, a hysteresis on the elbow) the calibrated
+    model diverges at that step over the validation part: the step is chosen again on the calibrated
+    model, and the candidates are scored against a baseline that runs (before: a KeyError from the
+    candidate fits, reported as ``error: pressure``)."""
+    cols = {}
+    for joint, seed in (("j2", 1), ("j3", 2)):
+        cli("excite", "--robot", "hydrolek", "--joint", joint, "--duration", 40, "--amplitude", 4, "--seed", seed,
+            "--no-guard", "--out", tmp_path / f"{joint}.csv", check=True)
+        ds = read_csv(tmp_path / f"{joint}.csv")
+        cols["time"] = ds["time"]
+        cols[f"u_{joint}"] = ds[f"u_{joint}"]
+    write_csv(tmp_path / "in.csv", cols)
+    cli("simulate", "--robot", "hydrolek", "--input", tmp_path / "in.csv", "--out", tmp_path / "measured.csv",
+        "--effect", "hysteresis:joint=j3,width=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
+    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "measured.csv", "--report", tmp_path / "rep", "--quiet",
+               "--effects", "hysteresis")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    again = d["numerics"]["calibrated_model"]
+    first = float(again["because"].split("step of ")[1].split(" s")[0])
+    assert again["substep"] < first and d["numerics"]["substep"] == again["substep"]
+    hyst = {c["joint"]: c for c in d["candidates"] if c["effect"] == "hysteresis"}
+    assert hyst["j3"]["gain"] > THRESHOLD_POINTS and math.isfinite(hyst["j2"]["gain"])
+    assert hyst["j3"]["params"]["width"] == pytest.approx(0.6, rel=0.25)

@@ -126,6 +126,20 @@ MAX_ESTIMATION_SAMPLES = 24000   # longer records are fitted on their first 2400
 MIN_WINDOW_SAMPLES = 10   # a restart anchors on the smoothed reading (5 samples at 50 Hz): windows are longer
 
 
+
+def _numerics(model, rec: Record, val: Record | None, vrec: Record) -> tuple[Runner, Runner, dict]:
+    """The fast runners for the candidate fits (estimation record, validation record) and what was
+    compared: the coarsest step checked over every sample the fits simulate, the validation part
+    included (a coarse step can hold on the first and drift on the second)."""
+    fast, numerics = choose_numerics(model, rec)
+    if val is not None:
+        vchk, vnumerics = choose_numerics(model, val)
+        numerics["validation"] = vnumerics
+        if (vchk.substep or 0.0) < (fast.substep or 0.0):
+            fast = Runner(rec, vchk.substep)
+            numerics["substep"] = vnumerics["substep"]
+    return fast, Runner(vrec, fast.substep), numerics
+
 def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
     """Estimation and validation problems: the first 60 % and the last 40 % of a single record, or the
     whole record and the whole validation record."""
@@ -187,14 +201,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # numerics for the many candidate fits, checked on this record
     # checked over every sample it will simulate: the estimation part and the validation part (a
     # coarse step can hold on the first and drift on the second)
-    fast, numerics = choose_numerics(m0, rec)
-    if val is not None:
-        vchk, vnumerics = choose_numerics(m0, val)
-        numerics["validation"] = vnumerics
-        if (vchk.substep or 0.0) < (fast.substep or 0.0):
-            fast = Runner(rec, vchk.substep)
-            numerics["substep"] = vnumerics["substep"]
-    vfast = Runner(vrec, fast.substep)
+    fast, vfast, numerics = _numerics(m0, rec, val, vrec)
     accurate, vaccurate = Runner(rec), Runner(vrec)
     timings["numerics"] = time.perf_counter() - t_start
 
@@ -207,6 +214,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     cal = calibrate(m0, fast, est, free=pl.free, why=pl.why)
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
+    if fast.substep is not None and not vfast.simulate(base_fast, vprob.n).ok:
+        # the step was checked on the nominal model: the calibrated one may need a finer one
+        coarse = fast.substep
+        fast, vfast, again = _numerics(base_fast, rec, val, vrec)
+        numerics["calibrated_model"] = {**again, "because": f"the calibrated model diverged at the nominal model's "
+                                                             f"step of {coarse:g} s"}
+        numerics["substep"] = again["substep"]
     for c in cal.changes:
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")

@@ -133,9 +133,9 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.max_sims,
                  uncertainty=False, tol=1e-3)
     out = st.val_runner.simulate(res.spec, st.val.n)
-    if not out.ok and st.val_runner.substep is not None:
-        # the fast integrator step was checked on the baseline, not on every fitted candidate: a
-        # candidate that diverges there is scored, like the model it is compared with, at the default step
+    if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
+        # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
+        # or recalibrated model: where either diverges there, both are scored at the default step
         default = Runner(st.val_runner.rec)
         out = default.simulate(res.spec, st.val.n)
         base_out = default.simulate(base_spec, st.val.n)
