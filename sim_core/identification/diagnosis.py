@@ -25,8 +25,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..dataset import column_unit
 from . import output_error as oe
-from . import command_null, conditional, polarity
+from . import command_null, conditional, held_at_extreme, polarity
 from .calibration import calibrate, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
@@ -438,6 +439,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if nulls:
             unexplained["command_null"] = nulls
             unexplained["record_causes"] = command_null.causes(nulls) + unexplained["record_causes"]
+    if unexplained and check.held_at_extreme:
+        unexplained["record_causes"] = [held_at_extreme.cause(j, f, column_unit(f"q_{j}", spec))
+                                        for j, f in check.held_at_extreme.items()] + unexplained["record_causes"]
     if unexplained and selected:
         # a named cause must explain the record: the effects tried stay in the report as the closest
         # candidates, the model is not extended

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import Dataset, DatasetError, input_matrix
+from ..dataset import Dataset, DatasetError, column_unit, input_matrix
+from . import held_at_extreme
 from .metrics import fit_ceiling, noise_std
 
 ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
@@ -88,6 +89,7 @@ class DataCheck:
     command_saturation_share: dict[str, float]  # share of samples at the command range limits
     initial_pose_source: dict[str, str]        # 'spec' or 'data'
     fit_ceiling: dict[str, float]              # best angle fit a perfect model reaches (noise floor)
+    held_at_extreme: dict[str, dict] = field(default_factory=dict)  # held_at_extreme.find per joint
 
     def to_dict(self) -> dict:
         return {
@@ -95,6 +97,7 @@ class DataCheck:
             "noise_rad": self.noise, "end_stop_share": self.end_stop_share,
             "command_saturation_share": self.command_saturation_share,
             "initial_pose_source": self.initial_pose_source, "fit_ceiling": self.fit_ceiling,
+            "held_at_extreme": self.held_at_extreme,
         }
 
 
@@ -279,8 +282,17 @@ def check_record(rec: Record, spec) -> DataCheck:
                              f"[{lo:.3f}, {hi:.3f}] rad: check the units (rad) and the sensor calibration")
         src[j] = "spec" if rec.pose_kind == "true" else "data"
         ceiling[j] = fit_ceiling(y, noise[j])
+    held = {}
     for j in rec.excited:
         lo, hi = spec.joint(j).command_range
         u = rec.u(j)
         sat[j] = float(np.mean((u <= lo + 1e-9) | (u >= hi - 1e-9)))
-    return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling)
+        if j in rec.angles:
+            i = tree.index(spec.joint(j).dof)
+            found = held_at_extreme.find(rec.time, rec.angles[j], u, noise[j], (lo, hi),
+                                         (float(tree.lower[i]), float(tree.upper[i])), END_STOP_MARGIN)
+            if found is not None:
+                held[j] = found
+                rec.notes.append(held_at_extreme.note(j, found, column_unit(f"q_{j}", spec)))
+    return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling,
+                     held)
