@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from numba import njit
 
 from sim_core.dynamics import rigid_body as rb
 from sim_core.dynamics.rigid_body import RigidBodyModel, RigidBodyWorkspace
+from sim_core.kernel.compose import kernel
+from sim_core.kernel.workspace import TreeArrays, make_workspace
 from sim_core.model.urdf import PRISMATIC, REVOLUTE, UrdfError, load_urdf
 
 URDF = Path(__file__).parent / "data" / "mixed_prismatic.urdf"
@@ -177,54 +178,43 @@ def test_power_balance_with_prismatic_joints(setup):
         assert rate == pytest.approx(float(v @ tau), rel=1e-9)
 
 
-@njit(cache=True)
-def _compiled_caller(t, q, qd, qdd, ws, tau, jtype):
-    """The three functions called from compiled code, as the kernel calls them (jtype None: omitted)."""
-    parent, R_tree, p_tree, axis, com, inertia, mass, gravity = t
-    Rw, ow, aw, cw, Iw, tmp33, mc, hc, Ic, M, w, dw, ao, F, N = ws
-    if jtype is None:
-        rb.kinematics(parent, R_tree, p_tree, axis, com, inertia, q, Rw, ow, aw, cw, Iw, tmp33)
-        rb.crba(parent, mass, ow, aw, cw, Iw, mc, hc, Ic, M)
-        rb.rnea(parent, mass, gravity, ow, aw, cw, Iw, qd, qdd, 1.0, w, dw, ao, F, N, tau)
-    else:
-        rb.kinematics(parent, R_tree, p_tree, axis, com, inertia, q, Rw, ow, aw, cw, Iw, tmp33, jtype)
-        rb.crba(parent, mass, ow, aw, cw, Iw, mc, hc, Ic, M, jtype)
-        rb.rnea(parent, mass, gravity, ow, aw, cw, Iw, qd, qdd, 1.0, w, dw, ao, F, N, tau, jtype)
-
-
 @pytest.mark.parametrize("robot", ["hydrolek", "mars_nd", "harvester"])
 def test_revolute_trees_give_bit_identical_results_with_and_without_jtype(plants, robot):
-    """kinematics/crba/rnea may be called with or without the trailing ``jtype``, from Python or
-    from compiled code: on an all-revolute tree all four give the same bits."""
+    """kinematics/crba/rnea may be called with or without the trailing ``jtype``: from Python, and in
+    the compiled kernel (its ``rigid_body_refresh``, which a revolute tree reaches with ``jtype`` None
+    and a tree with a prismatic joint with the joint types). On an all-revolute tree every route gives
+    the same bits."""
     t = plants(robot).tree
     assert not t.jtype.any()
     tt = (t.parent, t.R_tree, t.p_tree, t.axis, t.com, t.inertia, t.mass, t.gravity)
+    mod = kernel()
 
-    def python_calls(q, qd, qdd, ws, tau, jtype):
+    def python_calls(q, qd, qdd, jtype):
+        ws, tau = RigidBodyWorkspace(t.n), np.zeros(t.n)
         extra = () if jtype is None else (jtype,)
         rb.kinematics(*tt[:6], q, ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33, *extra)
         rb.crba(t.parent, t.mass, ws.ow, ws.aw, ws.cw, ws.Iw, ws.mc, ws.hc, ws.Ic, ws.M, *extra)
         rb.rnea(t.parent, t.mass, t.gravity, ws.ow, ws.aw, ws.cw, ws.Iw, qd, qdd, 1.0, ws.w, ws.dw, ws.ao, ws.F,
                 ws.N, tau, *extra)
+        return [ws.Rw, ws.ow, ws.cw, ws.Iw, ws.M, tau]
 
-    def compiled_calls(q, qd, qdd, ws, tau, jtype):
-        _compiled_caller(tt, q, qd, qdd, (ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33, ws.mc, ws.hc, ws.Ic, ws.M,
-                                          ws.w, ws.dw, ws.ao, ws.F, ws.N), tau, jtype)
+    def kernel_calls(q, qd, qdd, jtype):
+        assert not qdd.any()            # the kernel's refresh evaluates the bias at zero acceleration
+        arrays = TreeArrays(t.parent, t.R_tree, t.p_tree, t.axis, t.mass, t.com, t.inertia, t.gravity,
+                            None if jtype is None else np.ascontiguousarray(jtype, dtype=np.int64))
+        ws = make_workspace(t.n, 0)
+        mod.rigid_body_refresh(arrays, q, qd, ws)
+        return [ws.Rw, ws.ow, ws.cw, ws.Iw, ws.M, ws.bias]
 
-    out = []
-    for route in (python_calls, compiled_calls):
-        for jtype in (None, t.jtype):
-            rng = np.random.default_rng(3)
-            res = []
-            for _ in range(5):
-                ws, tau = RigidBodyWorkspace(t.n), np.zeros(t.n)
-                q, qd, qdd = rng.uniform(-3, 3, t.n), rng.normal(size=t.n), rng.normal(size=t.n)
-                route(q, qd, qdd, ws, tau, jtype)
-                res += [ws.Rw, ws.ow, ws.cw, ws.Iw, ws.M, tau]
-            out.append(res)
-    for other in out[1:]:
-        for x, y in zip(out[0], other):
-            assert x.tobytes() == y.tobytes()
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q, qd, qdd = rng.uniform(-3, 3, t.n), rng.normal(size=t.n), rng.normal(size=t.n)
+        routes = [python_calls(q, qd, qdd, None), python_calls(q, qd, qdd, t.jtype)]
+        zero = np.zeros(t.n)
+        routes += [python_calls(q, qd, zero, None), kernel_calls(q, qd, zero, None), kernel_calls(q, qd, zero, t.jtype)]
+        for a, b in ((0, 1), (2, 3), (2, 4)):
+            for x, y in zip(routes[a], routes[b]):
+                assert x.tobytes() == y.tobytes()
 
 
 def test_prismatic_flags_change_the_dynamics(setup):
