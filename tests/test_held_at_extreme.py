@@ -126,3 +126,11 @@ def test_a_rig_shorter_than_its_spec_is_said_to_be_held_and_diagnosed_right_with
     assert any("stays at 0.38" in c for c in d["spec"]["unexplained"]["record_causes"])
     assert d["real"]["data"]["held_at_extreme"] == {}
     assert d["real"]["verdict"] == "no_significant_discrepancy"
+    # a prismatic joint's notes speak metres
+    assert any(n.startswith("lift: the record starts at 0.2") and " m (+-" in n and "rad" not in n
+               for n in d["spec"]["data"]["notes"])
+    # `fit` on the same log says it too (in its output and its --json)
+    proc = cli("fit", "--robot", tmp_path / "spec", tmp_path / "log.csv", "--out", tmp_path / "p.toml", "--json",
+               *reading)
+    assert proc.returncode == 0, proc.stderr
+    assert any("stays at 0.38" in n and "end stop" in n for n in json.loads(proc.stdout)["notes"])

@@ -70,5 +70,7 @@ def run(args):
         for j, ch in fits.items():
             text = ", ".join(f"{c} {v['before']:.2f} -> {v['after']:.2f} % (+-{v['spread']:.2f})" for c, v in ch.items())
             print(f"  fit on {where}, {j}: {text}")
+    for note in res.get("notes", []):
+        print(f"  note: {note}")
     print(f"  wrote {args.out}")
     return 0

@@ -34,7 +34,7 @@ from .candidates import bank
 from .decision import FAR_POINTS, SIGNIFICANCE, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter
-from .record import ESTIMATION_SHARE, DataCheck, Record, check_record
+from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
@@ -195,7 +195,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     notes = list(rec.notes) + (list(val.notes) if val is not None else [])
     for j, share in check.end_stop_share.items():
         if share > 0.05:
-            notes.append(f"{j}: {100 * share:.0f} % of the samples are within {0.01:g} rad of a joint limit (end-stop contact)")
+            notes.append(f"{j}: {100 * share:.0f} % of the samples are within {END_STOP_MARGIN:g} "
+                         f"{column_unit(f'q_{j}', spec)} of a joint limit (end-stop contact)")
     est, vprob, vrec, split = _split(rec, val, targets, notes)
     m0 = model_spec(spec)
 

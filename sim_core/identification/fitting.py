@@ -16,7 +16,7 @@ from .calibration import identifiability, mark_conditional, mark_elasticities, p
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
-from .record import Record
+from .record import Record, check_record
 from .simulation import Runner, choose_numerics, model_spec
 
 NOISE_DRAWS = 16
@@ -101,6 +101,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
         free, keys, why, held = pl.free, pl.keys, pl.why, pl.held
     nominal = {fp.key: fp.get(m0) for fp in free}
     targets = rec.targets
+    check_record(rec, spec)            # what the record shows that no parameter can fit goes to its notes
     prob = oe.Problem(rec, targets)
     fast, numerics = choose_numerics(m0, rec)
     start = scan_flow_gains(m0, fast, prob, keys)      # least squares stalls on a jagged cost
@@ -125,12 +126,14 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     result = {
         "robot": spec.name, "source": rec.source, "simulations": res.sims + fitted.sims + (final.sims if final is not fitted else 0),
         "numerics": numerics, "switched_on": switched,
-        "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)},
+        "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)}, "notes": list(rec.notes),
     }
     if val is not None:
         missing = [f"q_{j}" for j in targets if j not in val.angles]
         if missing:
             raise ValueError(f"--validation {val.source}: no column {', '.join(missing)}")
+        check_record(val, spec)
+        result["notes"] += [f"{val.source}: {n}" for n in val.notes]
         vprob = oe.Problem(val, targets)
         vr = Runner(val)
         result["fit"][val.source] = _fits(vprob, vr.simulate(m0), vr.simulate(final.spec), val)

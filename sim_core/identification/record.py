@@ -27,7 +27,7 @@ ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % va
 MIN_SAMPLES = 50
 MIN_DURATION = 2.0          # s
 START_WINDOWS = (0.02, 0.05, 0.1, 0.2, 0.5)   # s: spans the start reading is fitted over (first_reading)
-END_STOP_MARGIN = 0.01      # rad: closer to a joint limit counts as end-stop contact
+END_STOP_MARGIN = 0.01      # rad (m on a prismatic joint): closer to a joint limit counts as end-stop contact
 STILL_SPAN = 10.0           # noise sigmas: a commanded joint whose reading spans less does not move
 
 
@@ -198,14 +198,16 @@ def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, f
         i = tree.index(spec.joint(j).dof)
         lo, hi = float(tree.lower[i]), float(tree.upper[i])
         inside = min(max(q_meas, lo + END_STOP_MARGIN), hi - END_STOP_MARGIN) if lo < hi else q_meas
+        unit = column_unit(f"q_{j}", spec)
         if inside != q_meas:
-            notes.append(f"{j}: the record starts at {q_meas:.3f} rad, outside the joint's range [{lo:.3f}, {hi:.3f}] "
-                         f"rad (check the units, rad, and the sensor calibration); the simulation starts at {inside:.3f}")
+            notes.append(f"{j}: the record starts at {q_meas:.3f} {unit}, outside the joint's range [{lo:.3f}, {hi:.3f}] "
+                         f"{unit} (check the units, {unit}, and the sensor calibration); the simulation starts at "
+                         f"{inside:.3f}")
             q_meas = inside
         pose[j] = q_meas
         if abs(q_meas - q_spec) > 1e-3:
-            notes.append(f"{j}: the record starts at {q_meas:.4f} rad (+-{se:.1e} from its first readings), "
-                         f"{q_meas - q_spec:+.3f} rad from the model's initial position; the simulation starts there")
+            notes.append(f"{j}: the record starts at {q_meas:.4f} {unit} (+-{se:.1e} from its first readings), "
+                         f"{q_meas - q_spec:+.3f} {unit} from the model's initial position; the simulation starts there")
     return pose
 
 
@@ -278,8 +280,9 @@ def check_record(rec: Record, spec) -> DataCheck:
         stops[j] = float(near.mean())
         out = (y < lo - 0.1) | (y > hi + 0.1) if math.isfinite(lo) and math.isfinite(hi) else np.zeros(y.size, bool)
         if out.any():
-            rec.notes.append(f"q_{j}: {100 * out.mean():.0f} % of the samples lie more than 0.1 rad outside the joint's range "
-                             f"[{lo:.3f}, {hi:.3f}] rad: check the units (rad) and the sensor calibration")
+            unit = column_unit(f"q_{j}", spec)
+            rec.notes.append(f"q_{j}: {100 * out.mean():.0f} % of the samples lie more than 0.1 {unit} outside the joint's "
+                             f"range [{lo:.3f}, {hi:.3f}] {unit}: check the units ({unit}) and the sensor calibration")
         src[j] = "spec" if rec.pose_kind == "true" else "data"
         ceiling[j] = fit_ceiling(y, noise[j])
     held = {}
