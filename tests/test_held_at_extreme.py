@@ -126,7 +126,9 @@ def test_a_rig_shorter_than_its_spec_is_said_to_be_held_and_diagnosed_right_with
     assert any("stays at 0.38" in c for c in d["spec"]["unexplained"]["record_causes"])
     assert d["real"]["data"]["held_at_extreme"] == {}
     assert d["real"]["verdict"] == "no_significant_discrepancy"
-    # a prismatic joint's notes speak metres
+    # a prismatic joint's notes and report speak metres
+    html = (tmp_path / "rep_spec" / "report.html").read_text()
+    assert "lift: position noise" in html and " mm, fit ceiling" in html and "mrad" not in html
     assert any(n.startswith("lift: the record starts at 0.2") and " m (+-" in n and "rad" not in n
                for n in d["spec"]["data"]["notes"])
     # `fit` on the same log says it too (in its output and its --json)

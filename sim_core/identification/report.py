@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import background_import
+from ..dataset import column_unit
 from ..effects import EFFECTS
 from . import conditional
 from .closed_loop import RESTART_TAUS
@@ -157,6 +158,13 @@ def _traces(d: Diagnosis, joint: str):
     return rec, rec.angles[joint], d.baseline_out.angles.get(joint), d.extended_out.angles.get(joint)
 
 
+def _position(d: Diagnosis, joint: str) -> tuple[str, str]:
+    """What the joint's position is called and its unit: ('position', 'm') on a prismatic joint,
+    ('angle', 'rad') on a revolute one."""
+    unit = column_unit(f"q_{joint}", d.baseline_spec)
+    return ("position", unit) if unit == "m" else ("angle", unit)
+
+
 def _fig_angles(plt, d: Diagnosis, joint: str) -> str:
     """Measured vs baseline vs extended angle, the validation part shaded."""
     rec, y, yb, ye = _traces(d, joint)
@@ -170,7 +178,7 @@ def _fig_angles(plt, d: Diagnosis, joint: str) -> str:
         ax.plot(t, ye, color="tab:blue", lw=0.8, ls="--", label=f"extended ({d.extended_fits[joint]['angle']:.1f} %)")
     ax.axvspan(t_val, t[-1], color="0.92", zorder=0, label="validation")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel(f"{joint} angle (rad)")
+    ax.set_ylabel("{} {} ({})".format(joint, *_position(d, joint)))
     ax.legend(loc="upper right", fontsize=8, ncol=4)
     return _png(fig)
 
@@ -195,7 +203,7 @@ def _fig_residuals(plt, d: Diagnosis, joint: str) -> str:
                 label=f"evidence: where {s['effect']} changes the prediction most ({EVIDENCE.get(s['effect'], '')})")
     ax.axvline(t_val, color="0.5", lw=0.8, ls=":")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("angle residual (rad)")
+    ax.set_ylabel("{} residual ({})".format(*_position(d, joint)))
     ax.legend(loc="upper right", fontsize=8)
     return _png(fig)
 
@@ -367,7 +375,8 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
     parts.append(f"<li>{chk['rate_hz']:.1f} Hz, {chk['duration_s']:.1f} s, diagnosed joints: {e(', '.join(chk['targets']))}, "
                  f"pressures {'recorded' if chk['pressures'] else 'not recorded'}</li>")
     for j, s in chk["noise_rad"].items():
-        parts.append(f"<li>{e(j)}: angle noise {s * 1e3:.3f} mrad, fit ceiling {chk['fit_ceiling'][j]:.1f} %, "
+        word, unit = _position(d, j)
+        parts.append(f"<li>{e(j)}: {word} noise {s * 1e3:.3f} m{unit}, fit ceiling {chk['fit_ceiling'][j]:.1f} %, "
                      f"end-stop contact {100 * chk['end_stop_share'][j]:.1f} %, start pose from {chk['initial_pose_source'][j]}</li>")
     for n in chk["notes"]:
         parts.append(f"<li>{e(n)}</li>")
