@@ -14,7 +14,7 @@ def register(sub):
     add_model_options(p)
     add_reading_options(p)
     p.add_argument("--noise-angle", type=float, metavar="RAD",
-                   help="standard deviation of the angle measurement noise (rad); default: the sensors' own")
+                   help="standard deviation of the position measurement noise (rad; m on a prismatic joint); default: the sensors' own")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     p.set_defaults(func=run)
 
