@@ -136,3 +136,10 @@ def test_a_rig_shorter_than_its_spec_is_said_to_be_held_and_diagnosed_right_with
                *reading)
     assert proc.returncode == 0, proc.stderr
     assert any("stays at 0.38" in n and "end stop" in n for n in json.loads(proc.stdout)["notes"])
+
+
+def test_a_joint_without_limits_in_the_spec_is_said_to_have_none():
+    t, y, u = p_loop()
+    f = find(t, y, u, limits=(-math.inf, math.inf))
+    assert f is not None and f["limit"] is None
+    assert "the spec has no upper limit" in H.note("swing", f, "rad") and json.dumps(f)

@@ -127,7 +127,6 @@ MAX_ESTIMATION_SAMPLES = 24000   # longer records are fitted on their first 2400
 MIN_WINDOW_SAMPLES = 10   # a restart anchors on the smoothed reading (5 samples at 50 Hz): windows are longer
 
 
-
 def _numerics(model, rec: Record, val: Record | None, vrec: Record) -> tuple[Runner, Runner, dict]:
     """The fast runners for the candidate fits (estimation record, validation record) and what was
     compared: the coarsest step checked over every sample the fits simulate, the validation part
@@ -140,6 +139,7 @@ def _numerics(model, rec: Record, val: Record | None, vrec: Record) -> tuple[Run
             fast = Runner(rec, vchk.substep)
             numerics["substep"] = vnumerics["substep"]
     return fast, Runner(vrec, fast.substep), numerics
+
 
 def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
     """Estimation and validation problems: the first 60 % and the last 40 % of a single record, or the

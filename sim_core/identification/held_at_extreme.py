@@ -30,7 +30,8 @@ def find(time: np.ndarray, y: np.ndarray, u: np.ndarray, noise: float, command_r
     """Where the joint (position ``y`` in its SI unit, command ``u`` in V) is held at the record's
     extreme while its command pushes it further; ``limits``: the spec's joint range (an extreme within
     ``margin`` of it is the model's end stop). Returns {'side', 'value', 'share', 'runs',
-    'longest_s', 'seconds', 'largest_command_v', 'limit'} of the side held longest, or None."""
+    'longest_s', 'seconds', 'largest_command_v', 'limit' (the spec's, None where it has none)} of the
+    side held longest, or None."""
     y, u, time = np.asarray(y, float), np.asarray(u, float), np.asarray(time, float)
     n = y.size
     if n < 10 or u.size != n:
@@ -67,7 +68,8 @@ def find(time: np.ndarray, y: np.ndarray, u: np.ndarray, noise: float, command_r
             mask[s:e] = True
         found = {"side": side, "value": extreme, "share": samples / n, "runs": int(keep.sum()),
                  "longest_s": float(np.max(ends - starts) * dt), "seconds": seconds,
-                 "largest_command_v": float(np.max(np.abs(u[mask]))), "limit": limit}
+                 "largest_command_v": float(np.max(np.abs(u[mask]))),
+                 "limit": limit if math.isfinite(limit) else None}
         if best is None or seconds > best["seconds"]:
             best = found
     return best
@@ -75,7 +77,7 @@ def find(time: np.ndarray, y: np.ndarray, u: np.ndarray, noise: float, command_r
 
 def _what(found: dict, unit: str) -> str:
     limit = found["limit"]
-    spec_has = (f"the spec's {found['side']} limit is {limit:.4g} {unit}" if math.isfinite(limit)
+    spec_has = (f"the spec's {found['side']} limit is {limit:.4g} {unit}" if limit is not None
                 else f"the spec has no {found['side']} limit")
     return (f"the position stays at {found['value']:.4g} {unit}, the record's "
             f"{'largest' if found['side'] == 'upper' else 'smallest'} value, for {100 * found['share']:.1f} % of "
