@@ -69,8 +69,7 @@ def test_a_calibrated_model_that_diverges_at_the_nominal_models_step_gets_a_fine
     """The fast step is chosen on the nominal model before the calibration. On this record (shoulder
     and elbow driven together, the elbow in its end stops, a hysteresis on the elbow) the calibrated
     model diverges at that step over the validation part: the step is chosen again on the calibrated
-    model, and the candidates are scored against a baseline that runs (before: a KeyError from the
-    candidate fits, reported as ``error: pressure``)."""
+    model, and the candidates are scored against a baseline that runs."""
     cols = {}
     for joint, seed in (("j2", 1), ("j3", 2)):
         cli("excite", "--robot", "hydrolek", "--joint", joint, "--duration", 40, "--amplitude", 4, "--seed", seed,
