@@ -108,3 +108,22 @@ def generate(cli, case: Case, where):
         args += ["--effect", f"{name}:{spec}" if spec else name]
     cli(*args, check=True)
     return meas, truth
+
+
+def elbow_hysteresis_record(cli, where, duration: float):
+    """HydroLek's shoulder and elbow driven together for ``duration`` s (each its own unguarded +-4 V
+    PRBS, the elbow often in its end stops), a 0.6 V hysteresis hidden on the elbow, written with
+    the real commands (excite, simulate); returns the measured CSV's path."""
+    from sim_core.dataset import read_csv, write_csv
+
+    cols = {}
+    for joint, seed in (("j2", 1), ("j3", 2)):
+        cli("excite", "--robot", "hydrolek", "--joint", joint, "--duration", duration, "--amplitude", 4, "--seed", seed,
+            "--no-guard", "--out", where / f"{joint}.csv", check=True)
+        ds = read_csv(where / f"{joint}.csv")
+        cols["time"] = ds["time"]
+        cols[f"u_{joint}"] = ds[f"u_{joint}"]
+    write_csv(where / "in.csv", cols)
+    cli("simulate", "--robot", "hydrolek", "--input", where / "in.csv", "--out", where / "measured.csv",
+        "--effect", "hysteresis:joint=j3,width=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
+    return where / "measured.csv"

@@ -9,12 +9,12 @@ import json
 
 import pytest
 
-from sim_core.dataset import read_csv, write_csv
+from sim_core.dataset import read_csv
 from sim_core.effects import EFFECTS, diagnosable
 from sim_core.identification.metrics import nrmse_fit
 from sim_core.identification.selection import THRESHOLD_POINTS
 
-from diagnose_cases import CASES, CLEAN, TWO, generate
+from diagnose_cases import CASES, CLEAN, TWO, elbow_hysteresis_record, generate
 
 CONTRACT_TOP = {"robot", "verdict", "baseline", "extended", "selected", "candidates"}
 
@@ -141,20 +141,11 @@ def test_two_joints_excited_together_only_the_hidden_effect_is_named(cli, tmp_pa
     """A record where two joints move at once (each its own PRBS), the elbow often at its end stop,
     a hysteresis hidden on the elbow: it is named there, with its width, and nothing else is (a
     greedy extra pick whose gain came from refitting the others is dropped by the final check)."""
-    cols = {}
-    for joint, seed in (("j2", 1), ("j3", 2)):
-        cli("excite", "--robot", "hydrolek", "--joint", joint, "--duration", 60, "--amplitude", 4, "--seed", seed,
-            "--no-guard", "--out", tmp_path / f"{joint}.csv", check=True)
-        ds = read_csv(tmp_path / f"{joint}.csv")
-        cols["time"] = ds["time"]
-        cols[f"u_{joint}"] = ds[f"u_{joint}"]
-    write_csv(tmp_path / "in.csv", cols)
-    cli("simulate", "--robot", "hydrolek", "--input", tmp_path / "in.csv", "--out", tmp_path / "measured.csv",
-        "--effect", "hysteresis:joint=j3,width=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
-    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "measured.csv", "--report", tmp_path / "rep", "--quiet")
+    measured = elbow_hysteresis_record(cli, tmp_path, 60)
+    proc = cli("diagnose", "--robot", "hydrolek", measured, "--report", tmp_path / "rep", "--quiet")
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
-    check_contract(d, "hydrolek", sensed_columns(tmp_path / "measured.csv"))
+    check_contract(d, "hydrolek", sensed_columns(measured))
     assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("hysteresis", "j3")], d["selected"]
     assert d["selected"][0]["params"]["width"] == pytest.approx(0.6, rel=0.10)
 

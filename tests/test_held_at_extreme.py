@@ -5,14 +5,13 @@ simulator), then a rig whose real travel is shorter than its spec's, end to end.
 
 import json
 import math
-import sys
 
 import numpy as np
 import pytest
 
 from sim_core.identification import held_at_extreme as H
 
-from conftest import ROOT
+from rig_records import closed_loop_record, write_headerless
 
 RATE = 50.0
 RANGE = (-10.0, 10.0)
@@ -98,9 +97,6 @@ def test_a_rig_shorter_than_its_spec_is_said_to_be_held_and_diagnosed_right_with
     """A 0.5 m cylinder rig whose real travel ends at 0.38 m (a stop the spec does not have), under P
     control with set points up to 0.45 m: the record's notes and its unexplained misfit say where it
     is held; with the rig's real range in the spec the same record has nothing left to explain."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from rig_records import closed_loop_record, write_headerless
-
     cli("rig", "new", "cylinder", "--out", tmp_path / "spec", check=True)
     cli("rig", "new", "cylinder", "--out", tmp_path / "real", check=True)
     urdf = tmp_path / "real" / "real.urdf"

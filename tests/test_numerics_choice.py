@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sim_core.dataset import Dataset, read_csv, write_csv
+from sim_core.dataset import Dataset
 from sim_core.excitation import multilevel_prbs
 from sim_core.identification.record import record_from_dataset
 from sim_core.identification.selection import THRESHOLD_POINTS
@@ -17,6 +17,8 @@ from sim_core.identification.simulation import (ANGLE_TOLERANCE, PRESSURE_TOLERA
 from sim_core.model.spec import load_robot
 from sim_core.plant import Plant
 from sim_core.simulator import Simulator
+
+from diagnose_cases import elbow_hysteresis_record
 
 
 def _record(spec, pressures=True):
@@ -70,17 +72,8 @@ def test_a_calibrated_model_that_diverges_at_the_nominal_models_step_gets_a_fine
     and elbow driven together, the elbow in its end stops, a hysteresis on the elbow) the calibrated
     model diverges at that step over the validation part: the step is chosen again on the calibrated
     model, and the candidates are scored against a baseline that runs."""
-    cols = {}
-    for joint, seed in (("j2", 1), ("j3", 2)):
-        cli("excite", "--robot", "hydrolek", "--joint", joint, "--duration", 40, "--amplitude", 4, "--seed", seed,
-            "--no-guard", "--out", tmp_path / f"{joint}.csv", check=True)
-        ds = read_csv(tmp_path / f"{joint}.csv")
-        cols["time"] = ds["time"]
-        cols[f"u_{joint}"] = ds[f"u_{joint}"]
-    write_csv(tmp_path / "in.csv", cols)
-    cli("simulate", "--robot", "hydrolek", "--input", tmp_path / "in.csv", "--out", tmp_path / "measured.csv",
-        "--effect", "hysteresis:joint=j3,width=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
-    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "measured.csv", "--report", tmp_path / "rep", "--quiet",
+    measured = elbow_hysteresis_record(cli, tmp_path, 40)
+    proc = cli("diagnose", "--robot", "hydrolek", measured, "--report", tmp_path / "rep", "--quiet",
                "--effects", "hysteresis")
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
