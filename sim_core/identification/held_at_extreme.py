@@ -63,12 +63,9 @@ def find(time: np.ndarray, y: np.ndarray, u: np.ndarray, noise: float, command_r
         seconds = samples * dt
         if samples < MIN_SHARE * n or seconds < MIN_HELD_S:
             continue
-        mask = np.zeros(n, bool)
-        for s, e in zip(starts[keep], ends[keep]):
-            mask[s:e] = True
         found = {"side": side, "value": extreme, "share": samples / n, "runs": int(keep.sum()),
                  "longest_s": float(np.max(ends - starts) * dt), "seconds": seconds,
-                 "largest_command_v": float(np.max(np.abs(u[mask]))),
+                 "largest_command_v": max(float(np.max(np.abs(u[s:e]))) for s, e in zip(starts[keep], ends[keep])),
                  "limit": limit if math.isfinite(limit) else None}
         if best is None or seconds > best["seconds"]:
             best = found
