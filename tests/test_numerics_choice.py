@@ -78,8 +78,8 @@ def test_a_calibrated_model_that_diverges_at_the_nominal_models_step_gets_a_fine
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     again = d["numerics"]["calibrated_model"]
-    first = float(again["because"].split("step of ")[1].split(" s")[0])
-    assert again["substep"] < first and d["numerics"]["substep"] == again["substep"]
+    assert again["substep"] < again["nominal_model_substep"] and d["numerics"]["substep"] == again["substep"]
+    assert f"step of {again['nominal_model_substep']:g} s" in again["because"]
     hyst = {c["joint"]: c for c in d["candidates"] if c["effect"] == "hysteresis"}
     assert hyst["j3"]["gain"] > THRESHOLD_POINTS and math.isfinite(hyst["j2"]["gain"])
     assert hyst["j3"]["params"]["width"] == pytest.approx(0.6, rel=0.25)

@@ -220,8 +220,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # the step was checked on the nominal model: the calibrated one may need a finer one
         coarse = fast.substep
         fast, vfast, again = _numerics(base_fast, rec, val, vrec)
-        numerics["calibrated_model"] = {**again, "because": f"the calibrated model diverged at the nominal model's "
-                                                             f"step of {coarse:g} s"}
+        numerics["calibrated_model"] = {**again, "nominal_model_substep": coarse,
+                                        "because": f"the calibrated model diverged at the nominal model's "
+                                                   f"step of {coarse:g} s"}
         numerics["substep"] = again["substep"]
     for c in cal.changes:
         if not c["identified"]:
