@@ -26,11 +26,17 @@ def reference_steps(lo: float, hi: float, duration: float, rng) -> callable:
     return lambda tt: levels[np.searchsorted(times, tt, side="right") - 1]
 
 
+def sine_reference(lo: float, hi: float, duration: float, rng) -> callable:
+    """A raised-cosine set point sweeping [lo, hi] at 0.1-0.3 Hz: the tracking test of a bench."""
+    f = rng.uniform(0.1, 0.3)
+    return lambda tt: lo + (hi - lo) * 0.5 * (1.0 - np.cos(2.0 * np.pi * f * tt))
+
+
 def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[str, float], seed: int,
                        duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
                        start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1,
                        extra: tuple[tuple[str, dict], ...] = (), ti: float | None = None,
-                       reference_range: tuple[float, float] | None = None):
+                       reference_range: tuple[float, float] | None = None, reference=reference_steps):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
@@ -40,7 +46,8 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     ``extra``: more (effect, params) of the truth at the joint, physics the diagnosis is not asked to
     name (a Stribeck friction: real seals); ``ti``: integral time (s) of a PI controller (integral
     gain kp / ti), its integral frozen while the command saturates (anti-windup); None: P only.
-    ``reference_range``: (low, high) of the reference steps (default: the middle 60 % of the range)."""
+    ``reference_range``: (low, high) of the set points (default: the middle 60 % of the range);
+    ``reference``: how the set point moves in it (``reference_steps`` or ``sine_reference``)."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
@@ -59,7 +66,7 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     u_lo, u_hi = spec.joint(joint).command_range
     kp = kp if kp is not None else u_hi / (0.2 * span)
     ki = 0.0 if ti is None else kp / ti
-    ref = reference_steps(*(reference_range or (lo_q + 0.2 * span, hi_q - 0.2 * span)), duration, rng)
+    ref = reference(*(reference_range or (lo_q + 0.2 * span, hi_q - 0.2 * span)), duration, rng)
     A = float(spec.get(f"joints.{joint}.sensor.A"))
     B = float(spec.get(f"joints.{joint}.sensor.B"))
     rows = []

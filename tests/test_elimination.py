@@ -7,10 +7,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from sim_core.identification import output_error as oe
 from sim_core.identification.calibration import identifiability, keep_rank
-from sim_core.identification.elimination import eliminate, strength
+from sim_core.identification.elimination import eliminate, jointly_identified, strength
 from sim_core.identification.parameters import FreeParameter
 
 FLOW, GAIN = "joints.lift.valve.rated_flow", "effects.sensor_gain.lift.gain"
@@ -22,13 +23,13 @@ class LinearRecord:
     """y = J theta + noise, the parameters held at 0 (their nominal value) when not free: a fit is
     ordinary least squares with the covariance s^2 (J'J)^-1, as the calibration's fits report it."""
 
-    def __init__(self, seed: int = 3, n: int = 200, noise: float = 1.7):
+    def __init__(self, seed: int = 3, n: int = 200, noise: float = 1.7, theta=(1.0, 1.0, 0.0, 3.0)):
         rng = np.random.default_rng(seed)
         s = rng.standard_normal((n, 4))
         # the flow and the sensor gain's columns correlate at 0.97 (below the 0.98 of the
         # correlation rule): each alone is well determined, the two together barely
         self.J = np.column_stack([s[:, 0], s[:, 0] + 0.25 * s[:, 1], s[:, 2], s[:, 3]])
-        self.y = self.J @ np.array([1.0, 1.0, 0.0, 3.0]) + noise * rng.standard_normal(n)
+        self.y = self.J @ np.array(theta) + noise * rng.standard_normal(n)
         self.free = {k: FreeParameter(k, -1e3, 1e3) for k in KEYS}
         self.fits = 0
 
@@ -38,20 +39,23 @@ class LinearRecord:
         A = self.J[:, idx]
         theta, *_ = np.linalg.lstsq(A, self.y, rcond=None)
         r = self.y - A @ theta
-        cov = float(r @ r) / (len(r) - len(idx)) * np.linalg.inv(A.T @ A)
+        s2 = float(r @ r) / (len(r) - len(idx))
+        cov = s2 * np.linalg.inv(A.T @ A)
         sd = np.sqrt(np.diag(cov))
         return oe.FitResult([self.free[k] for k in keys], dict(zip(keys, map(float, theta))), float(r @ r),
-                            sigma=dict(zip(keys, map(float, sd))), correlation=cov / np.outer(sd, sd))
+                            sigma=dict(zip(keys, map(float, sd))), correlation=cov / np.outer(sd, sd),
+                            cost_scale=s2)
 
     def refit(self, keep: list[FreeParameter], current: oe.FitResult) -> oe.FitResult:
         return self.fit([fp.key for fp in keep])
 
 
 def test_beside_identified_parameters_every_unidentified_one_goes_at_once():
-    """A flow gain and a sensor gain the record barely tells apart (each |value/sigma| about 2) beside
-    an identified load: both go back to nominal in one step, with the offset (no effect at all),
-    and the load is refitted alone, not one parameter after the other."""
-    rec = LinearRecord()
+    """A flow gain and a sensor gain the record barely tells apart (each |value/sigma| under 3) beside
+    an identified load, neither of them needed (both at nominal in the truth): both go back to
+    nominal in one step, with the offset (no effect at all), and the load is refitted alone, not one
+    parameter after the other."""
+    rec = LinearRecord(noise=6.0, theta=(0.0, 0.0, 0.0, 3.0))
     first = rec.fit(KEYS)
     verdict = identifiability(first)
     # the premise: the flow and the sensor gain are each unidentified with both free, the offset
@@ -59,13 +63,37 @@ def test_beside_identified_parameters_every_unidentified_one_goes_at_once():
     assert verdict[FLOW] is not None and verdict[GAIN] is not None and verdict[OFFSET] is not None
     assert "sigma" in verdict[FLOW] and "sigma" in verdict[GAIN]
     assert verdict[MASS] is None
-    assert identifiability(rec.fit([FLOW, MASS]))[FLOW] is None
+    assert not jointly_identified(first, rec.fit([MASS]), 3)
     rec.fits = 0
     keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
     assert [fp.key for fp in keep] == [MASS]
     assert set(dropped) == {FLOW, GAIN, OFFSET} and all(dropped[k][1] is first for k in dropped)
     assert rec.fits == 1
     assert identifiability(final)[MASS] is None
+
+
+def test_parameters_the_record_needs_together_go_one_at_a_time():
+    """The same pair, now both off nominal in the truth (each still under 3 sigma beside the other):
+    reset together the cost rises far beyond the 3-sigma level of a chi-square with as many degrees
+    of freedom, so only the weakest goes at a time; the one kept carries what the pair explained
+    (flow + gain = 2 here) and is identified. Reset together (the rule deleted), the load alone is
+    kept and the model misses what the pair explained."""
+    rec = LinearRecord()
+    first = rec.fit(KEYS)
+    verdict = identifiability(first)
+    assert verdict[FLOW] is not None and verdict[GAIN] is not None and verdict[MASS] is None   # the premise
+    reset_together = rec.fit([MASS])
+    assert jointly_identified(first, reset_together, 3)
+    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    kept = [fp.key for fp in keep]
+    assert MASS in kept and OFFSET not in kept and len(set(kept) & {FLOW, GAIN}) == 1, kept
+    pair = next(k for k in kept if k != MASS)
+    assert identifiability(final)[pair] is None
+    assert final.values[pair] == pytest.approx(2.0, abs=3 * final.sigma[pair])
+    # the final fit is as good as the record allows; the reset pair's is not
+    assert final.cost - first.cost < 9.0 * first.cost_scale < reset_together.cost - first.cost
+    # where the fit's cost scale is unknown, the joint rule says nothing (nothing is kept for it)
+    assert not jointly_identified(oe.FitResult(first.free, first.values, first.cost), reset_together, 3)
 
 
 def test_nothing_identified_drops_everything_and_returns_the_last_fit():

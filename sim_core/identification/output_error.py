@@ -188,6 +188,9 @@ class FitResult:
     residual: np.ndarray | None = None
     start_spec: object = None         # the spec the free values are applied to
     jacobian: np.ndarray | None = None   # d residual / d x at the optimum (add_uncertainty's)
+    # the cost that one unit of a parameter's (value/sigma)^2 is worth: s^2 N/N_eff (add_uncertainty's);
+    # how far the cost must rise when parameters are reset for the record to have identified them
+    cost_scale: float | None = None
 
     def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
         """'lower'/'upper' when the estimate sits on a search bound, else None."""
@@ -417,6 +420,7 @@ def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
         m_eff += effective_samples(seg)
         pos += y.size
     inflate = max(1.0, m / max(m_eff, 1.0))
+    out.cost_scale = s2 * inflate
     JtJ = J.T @ J
     try:
         cov = np.linalg.inv(JtJ) * s2 * inflate
