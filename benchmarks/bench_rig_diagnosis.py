@@ -16,8 +16,8 @@ hidden effect as its runner-up is counted apart (the report then says what would
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
-        [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
-        [--integral-time S] [--json FILE]
+        [--first-seed 1] [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
+        [--integral-time S] [--reference steps|sine] [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -36,7 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
 
-from rig_records import closed_loop_record, logged_like_a_daq, write_headerless  # noqa: E402
+from rig_records import closed_loop_record, logged_like_a_daq, reference_steps, sine_reference, write_headerless  # noqa: E402
 
 from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
@@ -71,8 +71,12 @@ def cli(*args) -> None:
         raise RuntimeError(f"hydrohil {' '.join(map(str, args[:2]))} failed: {p.stderr.strip()[-800:]}")
 
 
+REFERENCES = {"steps": reference_steps, "sine": sine_reference}
+
+
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
-             rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None) -> dict:
+             rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None,
+             reference: str = "steps") -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -84,7 +88,8 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
     rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
                                  seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every,
-                                 extra=realistic_truth(spec, joint) if realistic else (), ti=ti)
+                                 extra=realistic_truth(spec, joint) if realistic else (), ti=ti,
+                                 reference=REFERENCES[reference])
     if realistic:
         rows = logged_like_a_daq(rows, np.random.default_rng(1000 + seed), bits=12, dropouts=3)
     write_headerless(rows, work / "log.csv")
@@ -124,6 +129,7 @@ def main():
     ap.add_argument("--templates", default="cylinder,boom,rotary")
     ap.add_argument("--effects", default="deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none")
     ap.add_argument("--seeds", type=int, default=1, help="noise/excitation seeds per case (1..N)")
+    ap.add_argument("--first-seed", type=int, default=1, help="start the seeds here (FIRST..FIRST+N-1)")
     ap.add_argument("--flow", type=float, default=1.2, help="the rig's valve flow against its spec (factor)")
     ap.add_argument("--supply", type=float, default=0.85, help="the rig's supply pressure against its spec (factor)")
     ap.add_argument("--log-every", type=int, default=1, metavar="M",
@@ -135,16 +141,19 @@ def main():
                          "converter and three wiper dropouts to 0 V")
     ap.add_argument("--integral-time", type=float, default=None, metavar="S",
                     help="the rig's controller is PI with this integral time (s; integral gain kp / S), not P")
+    ap.add_argument("--reference", choices=list(REFERENCES), default="steps",
+                    help="what the rig's controller tracks: operator-like steps with holds, or a slow sine (0.1-0.3 Hz)")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
     cases = []
-    for seed in range(1, args.seeds + 1):
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         for template in args.templates.split(","):
             for effect in args.effects.split(","):
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
-                                 args.log_every, tuple(args.rig_set), args.realistic, args.integral_time)
+                                 args.log_every, tuple(args.rig_set), args.realistic, args.integral_time,
+                                 args.reference)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -164,6 +173,7 @@ def main():
           + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "")
           + ("; realistic: Stribeck seal friction in the truth, 12-bit volts, 3 dropouts" if args.realistic else "")
           + (f"; PI control, integral time {args.integral_time:g} s" if args.integral_time else "")
+          + ("; the set point a slow sine" if args.reference == "sine" else "")
           + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):

@@ -315,7 +315,7 @@ def test_a_rigs_wrong_nominal_parameters_are_calibration_findings_not_effects(cl
     for k in measured:
         corrected = rows[k]["value"] * 0.85 ** rows[k]["elasticity_to_held"]["supply.pressure"]
         assert corrected == pytest.approx(true_value(k), rel=0.03, abs=0), k
-    # `hydrohil fit` on the same record, its own elimination: the load it measures follows the supply too
+    # `hydrohil fit` on the same record, the same elimination: the load it measures follows the supply too
     proc = cli("fit", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--out", tmp_path / "fit.toml", "--json")
     assert proc.returncode == 0, proc.stderr
     load = json.loads(proc.stdout)["parameters"][partner]

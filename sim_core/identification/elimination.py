@@ -21,13 +21,13 @@ what the two explain together, and the effects named afterwards inherit its erro
 hanging cylinder's 4 % leak, seeds 1-2: 22-23 % low with one-at-a-time elimination, 9 % low with
 this rule before the flow gain went last, 2-3 % since; README, "Diagnose your own rig").
 
-Unless they are one together: parameters each under ``|value/sigma| = 3`` can still be what the
+Unless they matter together: parameters each under ``|value/sigma| = 3`` can still be what the
 record needs jointly (a supply pressure and a load mass of a cylinder without pressures: each
 trades against the other, their ratio sets the load pressure). Reset together, the cost rises by
 more than the 3-sigma level of a chi-square with as many degrees of freedom (in the fit's own
 ``cost_scale``: ``s^2 N/N_eff``), and every effect tried afterwards would "explain" the model that
-reset broke (measured on a hanging cylinder tracking a sine: the cost 28x higher, seven candidates
-within 1.2 points of each other, a deadband named as an area ratio). Then only the weakest goes and
+reset broke (measured on a cylinder lifting a load along a sine: the cost 28x higher, seven
+candidates within 1.2 points of each other, a deadband named as an area ratio). Then only the weakest goes and
 the rest are judged again, so one of them carries what they explained together (its row says on
 which held ones it is conditional).
 
@@ -45,7 +45,7 @@ from scipy.stats import chi2, norm
 from . import output_error as oe
 from .parameters import FreeParameter
 
-IDENTIFIED_SIGMAS = 3.0     # the calibration's |value/sigma| of an identified parameter, as a tail probability
+IDENTIFIED_SIGMAS = 3.0     # calibration.IDENTIFIED_RATIO (|value/sigma| of an identified parameter) as a tail level
 
 
 def jointly_identified(current: oe.FitResult, without: oe.FitResult, k: int) -> bool:

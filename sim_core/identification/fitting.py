@@ -12,7 +12,9 @@ import numpy as np
 
 from . import output_error as oe
 from . import conditional
-from .calibration import identifiability, mark_conditional, mark_elasticities, plan, scan_flow_gains
+from .calibration import (identifiability, is_baseline, keep_rank, mark_baseline, mark_conditional, mark_elasticities,
+                          plan, scan_flow_gains)
+from .elimination import eliminate
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
@@ -83,7 +85,8 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             out: str | None = None) -> dict:
     """Fit ``keys`` (default: the baseline calibration's plan, see calibration.py) and check each
     one's identifiability: a parameter the record does not identify is reported and written at its
-    nominal value, the others refitted without it."""
+    nominal value, the others refitted without it (which go, and when: elimination.py, as the
+    baseline calibration of ``diagnose`` does)."""
     spec = spec.copy()
     if keys:
         keys = list(keys)
@@ -110,21 +113,29 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     polish = [_narrowed(fp, res.values[fp.key], 1.5) if fp.log else fp for fp in free]
     final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
     fitted = final
-    verdict = identifiability(final) if final.ok else {k: None for k in keys}
-    if any(v is not None for v in verdict.values()):
-        reset = final.spec.copy()
-        for fp in polish:
-            if verdict[fp.key] is not None:
+    dropped: dict[str, tuple[str, oe.FitResult]] = {}
+    refits = [0]
+    if final.ok:
+        # what the record cannot identify goes back to nominal, by the calibration's rules (elimination.py)
+        def refit(keep, current):
+            reset = fitted.spec.copy()
+            for fp in polish:
+                fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
+            out = oe.fit(accurate, prob, reset, keep, max_sims=2 * (len(keep) + 1) + 4, tol=1e-3)
+            refits[0] += out.sims
+            return out
+
+        keep, final, dropped = eliminate(polish, fitted, identifiability, refit, keep_rank, last=is_baseline)
+        if not keep:
+            reset = fitted.spec.copy()
+            for fp in polish:
                 fp.apply(reset, nominal[fp.key])
-        keep = [fp for fp in polish if verdict[fp.key] is None]
-        if keep:
-            final = oe.fit(accurate, prob, reset, keep, max_sims=2 * (len(keep) + 1) + 4, tol=1e-3)
-        else:
-            final = oe.FitResult([], {}, fitted.cost, spec=reset, sims=0)
+            final = oe.FitResult([], {}, final.cost, spec=reset, sims=0)
+    verdict = {k: dropped[k][0] if k in dropped else None for k in keys}
     before = accurate.simulate(m0)
     after = accurate.simulate(final.spec)
     result = {
-        "robot": spec.name, "source": rec.source, "simulations": res.sims + fitted.sims + (final.sims if final is not fitted else 0),
+        "robot": spec.name, "source": rec.source, "simulations": res.sims + fitted.sims + refits[0],
         "numerics": numerics, "switched_on": switched,
         "parameters": {}, "fit": {rec.source: _fits(prob, before, after, rec)}, "notes": list(rec.notes),
     }
@@ -140,7 +151,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     changes = []
     for fp, k in zip(polish, keys):
         ok = verdict[k] is None
-        src = final if ok and k in final.values else fitted
+        src = final if ok and k in final.values else dropped[k][1] if k in dropped else fitted
         v_fit = src.values[k]
         v = v_fit if ok else nominal[k]
         result["parameters"][k] = {"value": v, "initial": nominal[k], "sigma": src.sigma.get(k, float("nan")),
@@ -153,6 +164,8 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             result["parameters"][k]["not_identified_because"] = verdict[k]
         changes.append(row)
     mark_conditional(changes)
+    if final.free:
+        mark_baseline(changes, identifiability(final), list(dropped))
     reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
     if reset_keys and final.free:
         mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob))
