@@ -183,3 +183,11 @@ def test_a_deadband_under_sine_tracking_is_named_with_the_load_carrying_the_supp
     load = rows[f"effects.payload.{j}.mass"]
     assert load["identified"] and not rows["supply.pressure"]["identified"]
     assert "supply.pressure" in load["conditional_on"]
+    # `hydrohil fit` keeps them by the same rules: reset all at once it ended where it started
+    # (angle fit 59.7 -> 59.7 %; 98.9 % with the load kept, the deadband's misfit left)
+    proc = cli("fit", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--out", tmp_path / "fit.toml", "--json")
+    assert proc.returncode == 0, proc.stderr
+    fitted = json.loads(proc.stdout)
+    assert fitted["parameters"][f"effects.payload.{j}.mass"]["identified"]
+    angle = next(iter(fitted["fit"].values()))[j]["angle"]          # the one record (no --validation)
+    assert angle["after"] > angle["before"] + 20.0, angle
