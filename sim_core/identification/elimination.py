@@ -107,7 +107,7 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
         if not every and len(weak) > 1:
             others = [fp for fp in failing if fp not in weak]
             before = refit([fp for fp in keep if fp not in others], current) if others else current
-            trial = refit([fp for fp in keep if fp not in failing], before)
+            trial = refit([fp for fp in keep if fp not in failing], current)
             if jointly_identified(before, trial, len(weak)):
                 # one at a time while they matter together: the weakest of them goes now
                 together, trial = True, None
