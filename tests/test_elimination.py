@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from sim_core.identification import output_error as oe
-from sim_core.identification.calibration import identifiability, keep_rank
-from sim_core.identification.elimination import eliminate, jointly_identified, strength
+from sim_core.identification.calibration import identifiability, jointly_identified, keep_rank
+from sim_core.identification.elimination import eliminate, strength
 from sim_core.identification.parameters import FreeParameter
 
 FLOW, GAIN = "joints.lift.valve.rated_flow", "effects.sensor_gain.lift.gain"
@@ -65,7 +65,8 @@ def test_beside_identified_parameters_every_unidentified_one_goes_at_once():
     assert verdict[MASS] is None
     assert not jointly_identified(first, rec.fit([MASS]), 3)
     rec.fits = 0
-    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank,
+                                    together=jointly_identified)
     assert [fp.key for fp in keep] == [MASS]
     assert set(dropped) == {FLOW, GAIN, OFFSET} and all(dropped[k][1] is first for k in dropped)
     assert rec.fits == 1
@@ -84,7 +85,8 @@ def test_parameters_the_record_needs_together_go_one_at_a_time():
     assert verdict[FLOW] is not None and verdict[GAIN] is not None and verdict[MASS] is None   # the premise
     reset_together = rec.fit([MASS])
     assert jointly_identified(first, reset_together, 3)
-    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    keep, final, dropped = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank,
+                                    together=jointly_identified)
     kept = [fp.key for fp in keep]
     assert MASS in kept and OFFSET not in kept and len(set(kept) & {FLOW, GAIN}) == 1, kept
     pair = next(k for k in kept if k != MASS)
@@ -92,6 +94,9 @@ def test_parameters_the_record_needs_together_go_one_at_a_time():
     assert final.values[pair] == pytest.approx(2.0, abs=3 * final.sigma[pair])
     # the final fit is as good as the record allows; the reset pair's is not
     assert final.cost - first.cost < 9.0 * first.cost_scale < reset_together.cost - first.cost
+    # without the joint rule the pair goes with the offset at once and the load is kept alone
+    keep, _, _ = eliminate(list(rec.free.values()), first, identifiability, rec.refit, keep_rank)
+    assert [fp.key for fp in keep] == [MASS]
     # where the fit's cost scale is unknown, the joint rule says nothing (nothing is kept for it)
     assert not jointly_identified(oe.FitResult(first.free, first.values, first.cost), reset_together, 3)
 

@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2, norm
 
 from . import conditional
 from . import output_error as oe
@@ -309,7 +310,8 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
 
-    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank, last=is_baseline)
+    keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank, last=is_baseline,
+                                       together=jointly_identified)
     if keep:
         cal_spec = current.spec
     else:
@@ -342,6 +344,18 @@ def at_bound(fp: FreeParameter, value: float) -> str | None:
         return None
     x = fp.to_x(value)
     return "lower" if x <= BOUND_SHARE else "upper" if x >= 1.0 - BOUND_SHARE else None
+
+
+def jointly_identified(current: oe.FitResult, without: oe.FitResult, k: int) -> bool:
+    """Whether resetting ``k`` parameters of ``current`` (refitted as ``without``) raises the cost
+    beyond the level of a chi-square with ``k`` degrees of freedom that has the tail of
+    ``|value/sigma| = IDENTIFIED_RATIO`` for one, in ``current``'s cost scale; False where that scale
+    is unknown (elimination.py: such parameters go one at a time)."""
+    scale = current.cost_scale
+    if scale is None or not math.isfinite(scale) or scale <= 0 or not without.ok:
+        return False
+    level = float(chi2.isf(2.0 * norm.sf(IDENTIFIED_RATIO), k))
+    return without.cost - current.cost > level * scale
 
 
 def identifiability(res: oe.FitResult) -> dict[str, str | None]:

@@ -25,14 +25,14 @@ Unless they matter together: parameters each under ``|value/sigma| = 3`` can sti
 record needs jointly (a supply pressure and a load mass of a cylinder without pressures: each
 trades against the other, their ratio sets the load pressure). Reset together, the cost rises by
 more than the 3-sigma level of a chi-square with as many degrees of freedom (in the fit's own
-``cost_scale``: ``s^2 N/N_eff``), and every effect tried afterwards would "explain" the model that
+``cost_scale``: ``s^2 N/N_eff``; calibration's ``jointly_identified``), and every effect tried afterwards would "explain" the model that
 reset broke (measured on a cylinder lifting a load along a sine: the cost 28x higher, seven
 candidates within 1.2 points of each other, a deadband named as an area ratio). Then only the weakest goes and
 the rest are judged again, so one of them carries what they explained together (its row says on
 which held ones it is conditional).
 
-``identifiability`` (calibration) says why a parameter is not identified; this module only decides
-which of them go, and when.
+``identifiability`` (calibration) says why a parameter is not identified and ``jointly_identified``
+(calibration) whether several are together; this module only decides which of them go, and when.
 """
 
 from __future__ import annotations
@@ -40,23 +40,8 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-from scipy.stats import chi2, norm
-
 from . import output_error as oe
 from .parameters import FreeParameter
-
-IDENTIFIED_SIGMAS = 3.0     # calibration.IDENTIFIED_RATIO (|value/sigma| of an identified parameter) as a tail level
-
-
-def jointly_identified(current: oe.FitResult, without: oe.FitResult, k: int) -> bool:
-    """Whether resetting ``k`` parameters of ``current`` (refitted as ``without``) raises the cost
-    beyond the 3-sigma level of a chi-square with ``k`` degrees of freedom, in ``current``'s cost
-    scale; False where that scale is unknown."""
-    scale = current.cost_scale
-    if scale is None or not math.isfinite(scale) or scale <= 0 or not without.ok:
-        return False
-    level = float(chi2.isf(2.0 * norm.sf(IDENTIFIED_SIGMAS), k))
-    return without.cost - current.cost > level * scale
 
 
 def strength(res: oe.FitResult, key: str, reason: str, rank: Callable[[str], int]) -> tuple[int, float]:
@@ -74,7 +59,8 @@ def strength(res: oe.FitResult, key: str, reason: str, rank: Callable[[str], int
 def eliminate(free: list[FreeParameter], first: oe.FitResult,
               judge: Callable[[oe.FitResult], dict[str, str | None]],
               refit: Callable[[list[FreeParameter], oe.FitResult], oe.FitResult],
-              rank: Callable[[str], int], last: Callable[[str], bool] = lambda key: False
+              rank: Callable[[str], int], last: Callable[[str], bool] = lambda key: False,
+              together: Callable[[oe.FitResult, oe.FitResult, int], bool] | None = None
               ) -> tuple[list[FreeParameter], oe.FitResult, dict[str, tuple[str, oe.FitResult]]]:
     """Drop the parameters of ``free`` the record cannot identify (module docstring) and refit the
     rest after each drop.
@@ -83,7 +69,9 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
     one at an end of its range). ``refit(keep, current)``: the fit of ``keep`` with the dropped
     parameters at nominal, started from ``current``'s values. Returns the kept parameters, the last
     fit (the one the last parameter was dropped on when none is kept) and, per dropped key, why and
-    the fit it was judged on. ``last(key)``: a baseline parameter (module docstring)."""
+    the fit it was judged on. ``last(key)``: a baseline parameter (module docstring).
+    ``together(fit, refit without k of its parameters, k)``: whether those k, each failing only by
+    |value/sigma|, are identified jointly (module docstring); None: never."""
     keep, current = list(free), first
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
     bound_only = False          # after a drop beside identified parameters only one pushed to an end goes
@@ -103,20 +91,20 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
             failing = [min(failing, key=lambda fp: strength(current, fp.key, verdict[fp.key], rank))]
         # those that fail only by |value/sigma| (not at a range end, not tied to a kept partner)
         weak = [fp for fp in failing if verdict[fp.key].startswith("|value/sigma|")]
-        together, trial = False, None
-        if not every and len(weak) > 1:
+        one_by_one, trial = False, None
+        if together is not None and not every and len(weak) > 1:
             others = [fp for fp in failing if fp not in weak]
             before = refit([fp for fp in keep if fp not in others], current) if others else current
             trial = refit([fp for fp in keep if fp not in failing], current)
-            if jointly_identified(before, trial, len(weak)):
+            if together(before, trial, len(weak)):
                 # one at a time while they matter together: the weakest of them goes now
-                together, trial = True, None
+                one_by_one, trial = True, None
                 failing = others + [min(weak, key=lambda fp: strength(current, fp.key, verdict[fp.key], rank))]
         for fp in failing:
             dropped[fp.key] = (verdict[fp.key], current)
         keep = [fp for fp in keep if fp not in failing]
         if keep:
             current = trial if trial is not None else refit(keep, current)
-        if not every and not together:
+        if not every and not one_by_one:
             bound_only = True
     return keep, current, dropped

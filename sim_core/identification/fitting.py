@@ -12,8 +12,8 @@ import numpy as np
 
 from . import output_error as oe
 from . import conditional
-from .calibration import (identifiability, is_baseline, keep_rank, mark_baseline, mark_conditional, mark_elasticities,
-                          plan, scan_flow_gains)
+from .calibration import (identifiability, is_baseline, jointly_identified, keep_rank, mark_baseline, mark_conditional,
+                          mark_elasticities, plan, scan_flow_gains)
 from .elimination import eliminate
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
@@ -125,7 +125,8 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             refits[0] += out.sims
             return out
 
-        keep, final, dropped = eliminate(polish, fitted, identifiability, refit, keep_rank, last=is_baseline)
+        keep, final, dropped = eliminate(polish, fitted, identifiability, refit, keep_rank, last=is_baseline,
+                                         together=jointly_identified)
         if not keep:
             reset = fitted.spec.copy()
             for fp in polish:
