@@ -573,11 +573,32 @@ def test_unexplained_when_the_model_misses_by_far_and_the_residual_is_not_noise(
     assert why(score=far - 1.0, ceiling=100.0, residual_fails=True)
     # the same gap with a white, independent residual: the data show nothing to explain
     assert not why(score=far - 1.0, ceiling=100.0, residual_fails=False)
-    # within FAR_POINTS of the ceiling: explained
-    assert not why(score=far + 1.0, ceiling=100.0, residual_fails=True)
+    # within FAR_POINTS of the ceiling, effects named: explained
+    assert not why(score=far + 1.0, ceiling=100.0, residual_fails=True, named=True)
     # named effects that closed most of a runaway baseline's distance still leave it unexplained
     r = why(score=far - 1.0, ceiling=100.0, residual_fails=True, base_score=-3000.0)
     assert r and "close 100 %" in r[0]
+
+
+def test_unexplained_when_nothing_is_named_and_the_misfit_is_worth_more_than_a_named_cause_must_gain():
+    """``no_significant_discrepancy`` says the model matches the record. Where the residual tests fail
+    and the score sits more than the decision threshold under its noise ceiling, a candidate that
+    explained the misfit would have been named; none did, so the bank has no name for it (seen: a
+    small leak on a boom under P control, taken up by the calibration, angle 6 points under its
+    ceiling). Where effects are named only the far rule judges."""
+    why = lambda score, **kw: dc.unexplained_reasons(score=score, ceiling=97.4, angle_fits={"j": 93.6},
+                                                     **({"residual_fails": True, "named": False} | kw))
+    over = 97.4 - 1.5 * dc.THRESHOLD_POINTS
+    r = why(over)
+    assert r and "nothing in the bank explains" in r[0] and f"{1.5 * dc.THRESHOLD_POINTS:.1f} points below" in r[0]
+    # within the threshold: nothing a named cause could gain, the model matches the record
+    assert not why(97.4 - 0.5 * dc.THRESHOLD_POINTS)
+    # a white, independent residual: the gap is noise (or a ceiling set too high), not a misfit
+    assert not why(over, residual_fails=False)
+    # effects named: a discrepancy is already reported; only a far miss overrides it
+    assert not why(over, named=True)
+    # the rule not asked for (named None): as before it
+    assert not why(over, named=None)
 
 
 def test_unexplained_when_one_channel_misses_by_far_though_the_score_comes_close():
@@ -674,6 +695,11 @@ def test_evidence_names_the_band_and_the_time_of_an_unmodelled_8_hz_mode():
 def test_worst_channel_and_failing_residual_tests():
     assert worst_channel({"angle": 90.0, "velocity": 70.0, "pressure": 20.0, "score": 60.0}) == ("pressure", 20.0)
     assert worst_channel({"angle": -math.inf, "velocity": 70.0}) == ("angle", -math.inf)
+    # with the channels' noise ceilings: the one furthest below its own ceiling, not the lowest fit
+    # (a 50 Hz velocity at its ceiling of 93 % beside an angle 6 points under its ceiling of 99.7 %)
+    fits = {"angle": 93.6, "velocity": 92.9, "score": 95.2}
+    assert worst_channel(fits) == ("velocity", 92.9)
+    assert worst_channel(fits, {"angle": 99.7, "velocity": 93.0}) == ("angle", 93.6)
     white = {"ljung_box_p": 0.4, "independence": {"u": {"exceeds": False}}}
     assert not residual_fails(white)
     assert residual_fails(white | {"ljung_box_p": 1e-5})

@@ -33,7 +33,9 @@ The rules, in the order they apply:
   (extended or not) still misses the record by far (an angle fit below zero, or more than 10 points
   under the noise ceiling with failing residual tests), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
-  misfit on it, ``discrepancy`` when effects are named,
+  misfit on it, or when nothing is named while the score sits more than 2 points under the ceiling
+  with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when effects
+  are named,
   ``no_significant_discrepancy`` otherwise.
 """
 
@@ -499,7 +501,8 @@ def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: b
 def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, float], residual_fails: bool,
                         base_score: float | None = None, channel_fits: dict[str, dict[str, float]] | None = None,
                         channel_ceilings: dict[str, dict[str, float]] | None = None,
-                        base_channel_fits: dict[str, dict[str, float]] | None = None) -> list[str]:
+                        base_channel_fits: dict[str, dict[str, float]] | None = None,
+                        named: bool | None = None) -> list[str]:
     """Why the final model (the extended one, or the baseline when nothing is named) does not
     explain the record; empty when it does.
 
@@ -518,7 +521,11 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
       after closing less than EXPLAINED_SHARE of the baseline's distance on it. The residual tests
       see the velocity residual only; a cause that fits the motion and leaves much of a pressure
       misfit (a Coulomb friction standing for a Stribeck curve, a leak for a low supply pressure)
-      is the closest effect, not the cause."""
+      is the closest effect, not the cause;
+    * nothing named (``named`` False) while the score sits more than THRESHOLD_POINTS below the noise
+      ceiling and the residual tests fail: the record shows a misfit worth more than any gain that
+      counts, and neither the calibration nor a candidate explains it. ``no_significant_discrepancy``
+      would say the model matches the record; it does not. ``named`` None: this rule is not applied."""
     why = []
     below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
     if below:
@@ -538,6 +545,10 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             why.append("the model's " + ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise "
                                                    f"ceiling {c:.1f}" for j, ch, f, c in far)
                        + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+    if not why and named is False and gap > THRESHOLD_POINTS and residual_fails:
+        why.append(f"nothing in the bank explains the misfit the residual tests show: the model's score {score:.1f} "
+                   f"is {gap:.1f} points below its noise ceiling {ceiling:.1f}, more than the {THRESHOLD_POINTS:g} "
+                   f"points a named cause must gain")
     if base_channel_fits and channel_fits and channel_ceilings:
         for j, fits in channel_fits.items():
             c = channel_ceilings.get(j, {}).get("pressure")

@@ -479,7 +479,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                               base_score=_score(base_fits, joints),
                               channel_fits={j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints},
                               channel_ceilings=ceilings,
-                              base_channel_fits=base_fits if selected else None)
+                              base_channel_fits=base_fits if selected else None, named=bool(selected))
     if not why:
         return {}
     return {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
@@ -487,7 +487,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
             "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
             "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
                         for s in selected],
-            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits),
+            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits, ceilings),
             "record_causes": [HELD_REPLAY] if closed_loop else []}
 
 

@@ -64,18 +64,23 @@ def locate(t: np.ndarray, r: np.ndarray, window_s: float = WINDOW_S) -> dict:
             "strongest_s": [round(float(t[k * w]), 3), round(float(t[min((k + 1) * w, t.size - 1)]), 3)]}
 
 
-def worst_channel(fits: dict) -> tuple[str | None, float | None]:
-    """The channel (angle, velocity, pressure) with the lowest NRMSE fit."""
+def worst_channel(fits: dict, ceilings: dict | None = None) -> tuple[str | None, float | None]:
+    """The channel (angle, velocity, pressure) with the lowest NRMSE fit or, given the channels' noise
+    ceilings, the one furthest below its own ceiling (a noisy velocity fits worst and may still be
+    at its ceiling while the angle misses by points)."""
     chans = {c: v for c, v in fits.items() if c in ("angle", "velocity", "pressure") and v is not None}
     if not chans:
         return None, None
-    c = min(chans, key=lambda k: chans[k] if math.isfinite(chans[k]) else -math.inf)
+    ceilings = ceilings or {}
+    key = lambda k: (chans[k] - ceilings.get(k, 0.0)) if math.isfinite(chans[k]) else -math.inf
+    c = min(chans, key=key)
     return c, float(chans[c])
 
 
-def joint_evidence(t: np.ndarray, velocity_residual: np.ndarray, spectrum: tuple, fits: dict) -> dict:
+def joint_evidence(t: np.ndarray, velocity_residual: np.ndarray, spectrum: tuple, fits: dict,
+                   ceilings: dict | None = None) -> dict:
     """The evidence for one joint: worst channel and its fit, the time spans, the dominant band."""
-    ch, fit = worst_channel(fits)
+    ch, fit = worst_channel(fits, ceilings)
     return {"channel": ch, "channel_fit": None if fit is None or not math.isfinite(fit) else round(fit, 2),
             "where": locate(t, velocity_residual), "frequency": dominant_band(*spectrum)}
 
@@ -89,9 +94,10 @@ def residual_fails(test: dict, p_min: float = 0.01) -> bool:
     return any(v.get("exceeds") for v in test.get("independence", {}).values())
 
 
-def evidence(rec, prob, out, start: int, tests: dict, fits: dict) -> dict:
+def evidence(rec, prob, out, start: int, tests: dict, fits: dict, ceilings: dict | None = None) -> dict:
     """Per diagnosed joint of ``prob``: :func:`joint_evidence` of the validation residual of ``out``
-    (``tests``: residual_tests' answer for ``out``, whose spectrum is reused)."""
+    (``tests``: residual_tests' answer for ``out``, whose spectrum is reused; ``ceilings``: the
+    channels' noise ceilings per joint, when known)."""
     from .metrics import velocity
 
     res = {}
@@ -103,5 +109,6 @@ def evidence(rec, prob, out, start: int, tests: dict, fits: dict) -> dict:
             continue
         n = prob.n
         rw = velocity(rec.angles[j][:n], rec.dt)[start:] - velocity(out.angles[j][:n], rec.dt)[start:]
-        res[j] = joint_evidence(rec.time[start:n], rw, tj["_spectrum"], fits.get(j, {})) | {"tests_fail": residual_fails(tj)}
+        res[j] = joint_evidence(rec.time[start:n], rw, tj["_spectrum"], fits.get(j, {}),
+                                (ceilings or {}).get(j)) | {"tests_fail": residual_fails(tj)}
     return res
