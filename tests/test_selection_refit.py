@@ -38,7 +38,8 @@ def test_an_accepted_fit_stopped_by_its_budget_is_carried_on_before_the_next_rou
     n = int(rec.n * 0.6)
     est, val = oe.Problem(rec, [JOINT], n=n), oe.Problem(rec, [JOINT], start=n)
     runner = Runner(rec)
-    st = Setting(runner, est, runner, val, [FLOW_KEY], {JOINT: noise_std(rec.angles[JOINT])}, {}, max_sims=12)
+    st = Setting(runner, est, runner, val, [FLOW_KEY], {JOINT: noise_std(rec.angles[JOINT])}, {}, max_sims=12,
+                 fit_iterations=1)
     cands = bank(m, [JOINT], effects=["deadband"])
     sel = select(st, cands, m, workers=1, progress=False)
     assert [(e.candidate.effect, e.candidate.joint) for e in sel.accepted] == [("deadband", JOINT)]
@@ -56,3 +57,15 @@ def test_an_accepted_fit_stopped_by_its_budget_is_carried_on_before_the_next_rou
     as_accepted = model_with(m, [], ev.candidate, ev.values)
     assert cost(sel.model) < 0.99 * cost(as_accepted), (cost(sel.model), cost(as_accepted))
     assert score(sel.model) > score(as_accepted)
+
+
+def test_a_fit_with_many_free_parameters_gets_the_iterations_it_needs():
+    """The candidates' budget: at least ``max_sims``, and beyond it room for ranking every start and
+    ``fit_iterations`` forward-difference iterations (n + 1 simulations each) of all n free parameters
+    (a rig's calibrated nuisances beside an effect's own parameters)."""
+    st = Setting(None, None, None, None, [], {}, {}, max_sims=45)
+    assert st.budget(1) == 45                                     # a one-parameter fit keeps the fixed budget
+    for n, starts in ((5, 15), (8, 15), (12, 30)):
+        b = st.budget(n, starts)
+        assert b - (starts + 1) >= st.fit_iterations * (n + 1)
+    assert Setting(None, None, None, None, [], {}, {}, max_sims=12, fit_iterations=1).budget(2, 4) == 12
