@@ -53,7 +53,8 @@ __all__ = ["AMBIGUITY", "MAX_EFFECTS", "MAX_PAIRS", "NOISE_FACTOR", "SIGNIFICANC
 
 NOISE_DRAWS = 16
 UNCERTAINTY_SHARE = 0.5     # candidates below this share of the threshold skip the uncertainty step
-FIT_ITERATIONS = 20         # least-squares iterations a fit may take after ranking its starting points (a guard: fits stop on their tolerance)
+FIT_ITERATIONS = 20         # least-squares iterations a fit may take after ranking its starts (a guard: fits stop on
+                            # their tolerance)
 GRID_SHARE = 0.5            # starting points are ranked on the first half of the estimation data
 CALIBRATION_SPAN = 3.0      # a candidate may move the calibrated flow gains within x/÷ 3
 
@@ -142,8 +143,8 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     uncal = st.before_calibration(free[len(cand.free):], rest)
     if uncal != rest:
         grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
-    res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid, max_sims=st.budget(len(free), len(grid)),
-                 uncertainty=False, tol=1e-3)
+    res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid,
+                 max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
     out = st.val_runner.simulate(res.spec, st.val.n)
     if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
         # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
@@ -462,8 +463,8 @@ def _refit_rest(st: Setting, base_spec, model, ev: Evaluation, rest: list[Evalua
     free = [f for f in free if f.key != instead.key] + [replace(instead)]
     x0 = [f.get(minus) for f in free]
     grid = [x0[:-1] + [instead.from_x(instead.to_x(x0[-1] * f))] for f in (1.0, 0.8, 1.25)]
-    return oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid, max_sims=st.budget(len(free), len(grid)),
-                  uncertainty=False, tol=1e-3)
+    return oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid,
+                  max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
 
 
 def _extend(model, ev: Evaluation, recalibrate):
