@@ -271,12 +271,15 @@ def _spec_at(spec, free, x):
 
 def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, grid: list[list[float]] | None = None,
         grid_problem: Problem | None = None, max_sims: int = 60, uncertainty: bool = True,
-        tol: float = 1e-4, side=None) -> FitResult:
+        tol: float = 1e-4, side=None, start_at_current: bool = True) -> FitResult:
     """Fit the values of ``free`` in ``spec`` (a model spec) to the problem's channels.
 
     ``grid``: starting points (physical values, one list per point, in ``free``'s order), ranked on
     ``grid_problem`` (default: the problem itself; a shorter window is cheaper) by the
-    flow-gain-profiled cost; the current values are a starting point too. ``side``
+    flow-gain-profiled cost; the current values are a starting point too unless
+    ``start_at_current`` is False (a new effect at its null: there its slope may vanish, a leak
+    coefficient's or a deadband's, and a fit started there stays there, while its cost, next to
+    starts whose other parameters were fitted without the effect, can rank it first). ``side``
     (:class:`.side_by_side.SideBySide`): where the uncertainty's Jacobian columns run."""
     spec = spec.copy()
     x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
@@ -348,8 +351,10 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             # rank the starting points by the flow-gain-profiled cost, then start the calibrated
             # flow gains where the best point's profile put them
             gp = grid_problem or problem
+            if start_at_current:
+                starts.append(x0)
             costs, profiles = [], []
-            for x in starts + [x0]:
+            for x in starts:
                 if sims[0] >= max_sims:
                     raise _Budget
                 sims[0] += 1
@@ -360,7 +365,6 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                 c, scales = gp.profiled_cost(out_g)
                 costs.append(c)
                 profiles.append(scales)
-            starts.append(x0)
             i = int(np.argmin(costs))
             x_start = starts[i].copy()
             for k, fp in enumerate(free):

@@ -144,7 +144,8 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     if uncal != rest:
         grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid,
-                 max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
+                 max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3,
+                 start_at_current=cand.existing)
     out = st.val_runner.simulate(res.spec, st.val.n)
     if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
         # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
