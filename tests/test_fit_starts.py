@@ -15,6 +15,7 @@ from sim_core.excitation import multilevel_prbs
 from sim_core.identification import output_error as oe
 from sim_core.identification.candidates import bank
 from sim_core.identification.metrics import noise_std
+from sim_core.identification.parameters import find_effect
 from sim_core.identification.record import record_from_dataset
 from sim_core.identification.selection import Setting, _Baseline, evaluate, free_list, model_with
 from sim_core.identification.simulation import Runner, model_spec
@@ -62,13 +63,34 @@ def test_a_new_effect_is_not_started_at_its_null(record):
     assert fitted(False) == pytest.approx(LEAK, rel=0.05)
 
 
-def test_a_candidates_evaluation_starts_from_its_grid(record):
-    """``selection.evaluate`` fits a new candidate from its grid only."""
+class LeakLog(Runner):
+    """The real runner, keeping the leak coefficient of every model it simulates."""
+
+    def __init__(self, rec):
+        super().__init__(rec)
+        self.leaks = []
+
+    def simulate(self, spec, n=None, rec=None, owned=False):
+        inst = find_effect(spec, "leakage", JOINT)
+        self.leaks.append(inst.params["internal"] if inst is not None else 0.0)
+        return super().simulate(spec, n, rec, owned)
+
+
+def test_beside_accepted_effects_a_candidate_starts_from_its_grid(record):
+    """``selection.evaluate`` in a later round: with an effect already accepted (a deadband of zero
+    width, which changes nothing) the new leak candidate is fitted from its grid only: the model
+    without the leak is never simulated, and the fit finds it."""
     model = model_spec(load_robot("hydrolek"))
+    accepted = bank(model, [JOINT], effects=["deadband"])[0]
+    before = model_with(model, [], accepted, {f"effects.deadband.{JOINT}.width": 0.0})
     est, val = oe.Problem(record, [JOINT]), oe.Problem(record, [JOINT], start=int(record.n * 0.6))
-    runner = Runner(record)
-    st = Setting(runner, est, runner, val, [FLOW_KEY], {JOINT: noise_std(record.angles[JOINT])}, {})
+    runner = LeakLog(record)
+    st = Setting(runner, est, Runner(record), val, [FLOW_KEY], {JOINT: noise_std(record.angles[JOINT])}, {})
     base = _Baseline(st)
-    ev = evaluate(st, _leak_candidate(model), model, [], base.outputs(model), base.cost(model))
+    base_out, base_cost = base.outputs(before), base.cost(before)
+    runner.leaks.clear()
+    ev = evaluate(st, _leak_candidate(model), before, [(accepted, {})], base_out, base_cost, round_=2)
+    assert runner.leaks[0] == OVERSHOOT
+    assert min(runner.leaks) > 0.01 * LEAK
     assert ev.values[f"effects.leakage.{JOINT}.internal"] == pytest.approx(LEAK, rel=0.05)
     assert ev.gain > 2.0
