@@ -1,9 +1,9 @@
 """Where a candidate's fit starts. A new effect enters the model at its null (the model without it),
 and some effects' slopes vanish there: a leak coefficient's on its log scale, a deadband's at zero
-width. A least-squares fit started at the null stays there, so ranking the null among the grid's
-starts lets a hidden effect go unseen whenever every grid point overshoots it (or, in a later round,
-sits where the accepted effects were fitted without it). Real fits on a HydroLek shoulder record with
-a hidden leak and a grid whose only start is 150 times too large."""
+width. A least-squares fit started at the null can stay there. Beside accepted effects (fitted
+without the candidate, they absorb what they can of it) the null ranks above the grid's starts even
+where the effect is in the record, so there the fit starts from the grid only. Real fits on a
+HydroLek shoulder record with a hidden leak and a grid whose only start is 150 times too large."""
 
 import dataclasses
 
