@@ -2,7 +2,7 @@
 and some effects' slopes vanish there: a leak coefficient's on its log scale, a deadband's at zero
 width. A least-squares fit started at the null can stay there. Beside accepted effects (fitted
 without the candidate, they absorb what they can of it) the null ranks above the grid's starts even
-where the effect is in the record, so there the fit starts from the grid only. Real fits on a
+where the effect is in the record, so there the best grid point is fitted from too. Real fits on a
 HydroLek shoulder record with a hidden leak and a grid whose only start is 150 times too large."""
 
 import dataclasses
@@ -45,7 +45,7 @@ def _leak_candidate(model):
     return dataclasses.replace(cand, grid=[[OVERSHOOT, 1e-16]])
 
 
-def test_a_new_effect_is_not_started_at_its_null(record):
+def test_where_the_null_ranks_first_the_grid_is_fitted_from_too(record):
     model = model_spec(load_robot("hydrolek"))
     cand = _leak_candidate(model)
     s0 = model_with(model, [], cand, {})
@@ -54,13 +54,13 @@ def test_a_new_effect_is_not_started_at_its_null(record):
     prob, runner = oe.Problem(record, [JOINT]), Runner(record)
     key = f"effects.leakage.{JOINT}.internal"
 
-    def fitted(start_at_current):
+    def fitted(grid_start_too):
         return oe.fit(runner, prob, s0, free, grid=grid, max_sims=80, uncertainty=False, tol=1e-3,
-                      start_at_current=start_at_current).values[key]
+                      grid_start_too=grid_start_too).values[key]
 
     # the premise: the null ranks above the overshooting start, and a fit from there does not move
-    assert fitted(True) < 0.01 * LEAK
-    assert fitted(False) == pytest.approx(LEAK, rel=0.05)
+    assert fitted(False) < 0.01 * LEAK
+    assert fitted(True) == pytest.approx(LEAK, rel=0.05)
 
 
 class LeakLog(Runner):
@@ -78,8 +78,8 @@ class LeakLog(Runner):
 
 def test_beside_accepted_effects_a_candidate_starts_from_its_grid(record):
     """``selection.evaluate`` in a later round: with an effect already accepted (a deadband of zero
-    width, which changes nothing) the new leak candidate is fitted from its grid only: the model
-    without the leak is never simulated, and the fit finds it."""
+    width, which changes nothing) the new leak candidate, whose null ranks first, is fitted from its
+    grid point too (simulated there once to rank it and again to start from it), and found."""
     model = model_spec(load_robot("hydrolek"))
     accepted = bank(model, [JOINT], effects=["deadband"])[0]
     before = model_with(model, [], accepted, {f"effects.deadband.{JOINT}.width": 0.0})
@@ -90,7 +90,6 @@ def test_beside_accepted_effects_a_candidate_starts_from_its_grid(record):
     base_out, base_cost = base.outputs(before), base.cost(before)
     runner.leaks.clear()
     ev = evaluate(st, _leak_candidate(model), before, [(accepted, {})], base_out, base_cost, round_=2)
-    assert runner.leaks[0] == OVERSHOOT
-    assert min(runner.leaks) > 0.01 * LEAK
+    assert sum(v == pytest.approx(OVERSHOOT, rel=1e-6) for v in runner.leaks) >= 2
     assert ev.values[f"effects.leakage.{JOINT}.internal"] == pytest.approx(LEAK, rel=0.05)
     assert ev.gain > 2.0

@@ -271,16 +271,18 @@ def _spec_at(spec, free, x):
 
 def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, grid: list[list[float]] | None = None,
         grid_problem: Problem | None = None, max_sims: int = 60, uncertainty: bool = True,
-        tol: float = 1e-4, side=None, start_at_current: bool = True) -> FitResult:
+        tol: float = 1e-4, side=None, grid_start_too: bool = False) -> FitResult:
     """Fit the values of ``free`` in ``spec`` (a model spec) to the problem's channels.
 
     ``grid``: starting points (physical values, one list per point, in ``free``'s order), ranked on
     ``grid_problem`` (default: the problem itself; a shorter window is cheaper) by the
-    flow-gain-profiled cost; the current values are a starting point too unless
-    ``start_at_current`` is False (a new effect at its null: there its slope may vanish, a leak
-    coefficient's or a deadband's, and a fit started there stays there, while its cost, next to
-    starts whose other parameters were fitted without the effect, can rank it first). ``side``
-    (:class:`.side_by_side.SideBySide`): where the uncertainty's Jacobian columns run."""
+    flow-gain-profiled cost; the current values are a starting point too. ``grid_start_too``: where
+    the current values rank first, the best grid point is fitted from as well and the lower cost
+    kept (a new effect at its null: there its slope may vanish, a leak coefficient's or a
+    deadband's, and a fit started there stays there, while its cost, next to starts whose other
+    parameters were fitted without the effect, can rank it first; the null's own fit stays, since a
+    grid start can end in a worse minimum). ``side`` (:class:`.side_by_side.SideBySide`): where the
+    uncertainty's Jacobian columns run."""
     spec = spec.copy()
     x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
     sims = [0]
@@ -351,8 +353,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             # rank the starting points by the flow-gain-profiled cost, then start the calibrated
             # flow gains where the best point's profile put them
             gp = grid_problem or problem
-            if start_at_current:
-                starts.append(x0)
+            starts.append(x0)
             costs, profiles = [], []
             for x in starts:
                 if sims[0] >= max_sims:
@@ -365,18 +366,29 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                 c, scales = gp.profiled_cost(out_g)
                 costs.append(c)
                 profiles.append(scales)
+            def profiled(i):
+                x_start = starts[i].copy()
+                for k, fp in enumerate(free):
+                    parts = fp.key.split(".")
+                    if len(parts) == 4 and parts[0] == "joints" and parts[2:] == ["valve", "rated_flow"] and parts[1] in profiles[i]:
+                        x_start[k] = fp.to_x(fp.from_x(float(x_start[k])) * profiles[i][parts[1]])
+                return x_start
+
             i = int(np.argmin(costs))
-            x_start = starts[i].copy()
-            for k, fp in enumerate(free):
-                parts = fp.key.split(".")
-                if len(parts) == 4 and parts[0] == "joints" and parts[2:] == ["valve", "rated_flow"] and parts[1] in profiles[i]:
-                    x_start[k] = fp.to_x(fp.from_x(float(x_start[k])) * profiles[i][parts[1]])
+            x_starts = [profiled(i)]
+            if grid_start_too and i == len(starts) - 1 and len(starts) > 1:
+                x_starts.append(profiled(int(np.argmin(costs[:-1]))))
         else:
-            x_start = x0
+            x_starts = [x0]
         if free:
-            least_squares(resid, x_start, jac=jacobian,
-                          bounds=(0.0, 1.0), method="trf", diff_step=DIFF_STEP, x_scale=1.0,
-                          ftol=tol, xtol=tol, gtol=1e-8)
+            for x_start in x_starts:
+                accepted.clear()
+                try:
+                    least_squares(resid, x_start, jac=jacobian,
+                                  bounds=(0.0, 1.0), method="trf", diff_step=DIFF_STEP, x_scale=1.0,
+                                  ftol=tol, xtol=tol, gtol=1e-8)
+                except _Converged:
+                    pass
         else:
             resid(x0)
     except (_Budget, _Converged):

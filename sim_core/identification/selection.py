@@ -136,13 +136,13 @@ def affected_joints(cand: Candidate, targets: list[str]) -> list[str]:
 def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candidate, dict]],
              base_out: Outputs, base_cost: float, round_: int = 1) -> Evaluation:
     """Fit ``cand`` (jointly with the accepted effects and the calibration) and score it. Beside
-    accepted effects a new candidate is started from its grid only, not from its null: the accepted
-    effects were fitted without it and absorbed what they could of it, so the null ranks above
-    starts that hold them there, and a fit started at a null whose slope vanishes (a leak's, a
-    deadband's) stays there. In the first round the null stays a start: the ranking profiles the
-    calibrated flow gains for every start, so the null ranks first where the grid explains nothing
-    better (most candidates of a clean record: starting them from their grid cost 39 % more
-    simulations)."""
+    accepted effects a new candidate whose null ranks first is fitted from its best grid point too:
+    the accepted effects were fitted without it and absorbed what they could of it, so the null
+    ranks above starts that hold them there, and a fit started at a null whose slope vanishes (a
+    leak's, a deadband's) stays there. In the first round the null alone is fitted where it ranks
+    first: the ranking profiles the calibrated flow gains for every start, so there the grid
+    explains nothing better (most candidates of a clean record: fitting them from their grid as
+    well cost 39 % more simulations)."""
     s0 = model_with(base_spec, accepted, cand, {})
     free = free_list(s0, cand, accepted, st.calib_keys, st.ranges)
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
@@ -152,7 +152,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
         grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid,
                  max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3,
-                 start_at_current=cand.existing or not accepted)
+                 grid_start_too=bool(accepted) and not cand.existing)
     out = st.val_runner.simulate(res.spec, st.val.n)
     if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
         # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
