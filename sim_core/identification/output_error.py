@@ -366,6 +366,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
                 c, scales = gp.profiled_cost(out_g)
                 costs.append(c)
                 profiles.append(scales)
+
             def profiled(i):
                 x_start = starts[i].copy()
                 for k, fp in enumerate(free):

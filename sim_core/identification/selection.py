@@ -141,8 +141,8 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     ranks above starts that hold them there, and a fit started at a null whose slope vanishes (a
     leak's, a deadband's) stays there. In the first round the null alone is fitted where it ranks
     first: the ranking profiles the calibrated flow gains for every start, so there the grid
-    explains nothing better (most candidates of a clean record: fitting them from their grid as
-    well cost 39 % more simulations)."""
+    explains nothing better (starting every candidate of a clean record from its grid instead cost
+    39 % more simulations)."""
     s0 = model_with(base_spec, accepted, cand, {})
     free = free_list(s0, cand, accepted, st.calib_keys, st.ranges)
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
