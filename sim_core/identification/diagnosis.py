@@ -28,7 +28,7 @@ import numpy as np
 from ..dataset import column_unit
 from . import output_error as oe
 from . import command_null, conditional, held_at_extreme, polarity
-from .calibration import calibrate, plan
+from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
 from .decision import FAR_POINTS, SIGNIFICANCE, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
@@ -232,9 +232,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the candidates refit the identified model parameters with themselves. An effect parameter the
     # calibration switched on stays at its calibrated value (the candidate of that effect refits it),
     # except the spec's estimated ones: those are nuisances of the rig, refitted with every candidate
-    # and not offered as discrepancies of their own
+    # and not offered as discrepancies of their own. The flow gains are the baseline (what the joint's
+    # speed scales with): refitted with every candidate even where the calibration, fitting without
+    # the effect, sent them back to nominal (a record the nominal model drifts off whatever its flow
+    # gain: fitted at a wrong one, candidates compete at making up the speed, not at the record)
     def refit_keys(identified):
-        return [k for k in identified if not k.startswith("effects.") or k in nuisance]
+        keys = [k for k in identified if not k.startswith("effects.") or k in nuisance]
+        return keys + [k for k in pl.keys if is_baseline(k) and k not in keys]
 
     keys = refit_keys(cal.identified)
     # a large effect the nominal model lacks (a wide deadband) can dominate the baseline misfit so that
