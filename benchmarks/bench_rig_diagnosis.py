@@ -17,7 +17,7 @@ hidden effect as its runner-up is counted apart (the report then says what would
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
         [--first-seed 1] [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
-        [--integral-time S] [--reference steps|sine] [--json FILE]
+        [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -45,11 +45,12 @@ from sim_core.model.spec import load_robot  # noqa: E402
 TOLERANCE = 0.15
 
 
-def hidden_params(effect: str, spec, joint: str) -> dict | None:
-    """The hidden effect's parameters, sized to the rig (the checks' magnitudes)."""
+def hidden_params(effect: str, spec, joint: str, coulomb_share: float = 0.06) -> dict | None:
+    """The hidden effect's parameters, sized to the rig (the checks' magnitudes); ``coulomb_share``:
+    the Coulomb friction as a share of the actuator's full-pressure force or torque."""
     sc = actuator_scales(spec, joint)
     return {"deadband": {"width": 0.8}, "valve_asymmetry": {"ratio": 0.7}, "delay": {"delay": 0.06},
-            "coulomb_friction": {"torque": 0.06 * sc["torque"]},
+            "coulomb_friction": {"torque": coulomb_share * sc["torque"]},
             "leakage": {"internal": 0.04 * sc["q_full"] / spec.supply["pressure"]},
             "valve_offset": {"offset": 0.25}, "none": None}[effect]
 
@@ -76,7 +77,7 @@ REFERENCES = {"steps": reference_steps, "sine": sine_reference}
 
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
              rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None,
-             reference: str = "steps") -> dict:
+             reference: str = "steps", coulomb_share: float = 0.06) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -84,7 +85,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     joint = spec.joint_names[0]
     i = spec.tree.index(spec.joint(joint).dof)
     span = float(spec.tree.upper[i] - spec.tree.lower[i])
-    params = hidden_params(effect, spec, joint)
+    params = hidden_params(effect, spec, joint, coulomb_share)
     off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
     rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
                                  seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every,
@@ -143,6 +144,8 @@ def main():
                     help="the rig's controller is PI with this integral time (s; integral gain kp / S), not P")
     ap.add_argument("--reference", choices=list(REFERENCES), default="steps",
                     help="what the rig's controller tracks: operator-like steps with holds, or a slow sine (0.1-0.3 Hz)")
+    ap.add_argument("--coulomb-share", type=float, default=0.06, metavar="SHARE",
+                    help="the hidden Coulomb friction as a share of the full-pressure force (default 0.06)")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
@@ -153,7 +156,7 @@ def main():
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
                                  args.log_every, tuple(args.rig_set), args.realistic, args.integral_time,
-                                 args.reference)
+                                 args.reference, args.coulomb_share)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -174,6 +177,7 @@ def main():
           + ("; realistic: Stribeck seal friction in the truth, 12-bit volts, 3 dropouts" if args.realistic else "")
           + (f"; PI control, integral time {args.integral_time:g} s" if args.integral_time else "")
           + ("; the set point a slow sine" if args.reference == "sine" else "")
+          + (f"; Coulomb friction {args.coulomb_share:g} x the full-pressure force" if args.coulomb_share != 0.06 else "")
           + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):
