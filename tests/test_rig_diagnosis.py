@@ -195,10 +195,9 @@ def test_every_candidate_refits_a_flow_gain_the_baseline_could_not_keep(cli, tmp
     asymmetry of 0.7), P control, no pressures. Without the asymmetry the nominal model drifts off the
     record whatever its flow gain (baseline fit far below zero); the flow gain's fit stops at the end of
     its range and goes back to nominal, 1.7x the truth. Candidates fitted at that flow gain compete at
-    making the model slower, not at explaining the record: the asymmetry was `unexplained` (and, with
-    a real seal friction in the truth, a Coulomb friction 9x that friction was named). The flow gain is
-    the baseline: every candidate refits it, identified by the calibration or not, and the asymmetry
-    is named within 3 % with the model at its noise ceiling."""
+    making the model slower, not at explaining the record (a large Coulomb friction does that best).
+    The flow gain is the baseline: every candidate refits it, identified by the calibration or not,
+    and the asymmetry is named within 3 % with the model at its noise ceiling."""
     j, d = _diagnose(cli, tmp_path, "cylinder", ("valve_asymmetry", {"ratio": 0.7}), seed=7,
                      rig_set=("incline_deg=-90",), off_nominal={"valve.rated_flow": 0.6, "supply.pressure": 1.1})
     rows = {r["parameter"]: r for r in d["calibration"]["changes"]}
