@@ -297,7 +297,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     keys = [fp.key for fp in free]
     nominal = {fp.key: fp.get(spec) for fp in free}
     start = scan_flow_gains(spec, runner, problem, keys)
-    budget = max_sims + 4 * max(0, len(free) - len([k for k in keys if k.endswith(".valve.rated_flow")]))
+    budget = max_sims + 4 * max(0, len(free) - len([k for k in keys if is_baseline(k)]))
     res = oe.fit(runner, problem, start, free, max_sims=budget, uncertainty=uncertainty)
     if not uncertainty or not res.ok:
         changes = [_row(fp, nominal, res, res, None, why) for fp in free]
@@ -465,7 +465,7 @@ def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str]):
     best_spec = spec.copy()
     best = cost(best_spec)
     for key in keys:
-        if not key.endswith(".valve.rated_flow"):
+        if not is_baseline(key):
             continue
         v0 = best_spec.get(key)
         best_v = v0
