@@ -17,7 +17,8 @@ hidden effect as its runner-up is counted apart (the report then says what would
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
         [--first-seed 1] [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
-        [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--json FILE]
+        [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--measured supply,load,flow]
+        [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
 """
@@ -36,7 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
 
-from rig_records import closed_loop_record, logged_like_a_daq, reference_steps, sine_reference, write_headerless  # noqa: E402
+from rig_records import closed_loop_record, logged_like_a_daq, measured, reference_steps, sine_reference, write_headerless  # noqa: E402
 
 from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
@@ -77,7 +78,7 @@ REFERENCES = {"steps": reference_steps, "sine": sine_reference}
 
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
              rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None,
-             reference: str = "steps", coulomb_share: float = 0.06) -> dict:
+             reference: str = "steps", coulomb_share: float = 0.06, measured_keys: tuple[str, ...] = ()) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -94,10 +95,19 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     if realistic:
         rows = logged_like_a_daq(rows, np.random.default_rng(1000 + seed), bits=12, dropouts=3)
     write_headerless(rows, work / "log.csv")
+    rig = work / "rig"
+    if measured_keys:           # the user measured these: the truth's values written in, held by calibration
+        truth = {"supply": ("supply.pressure", spec.supply["pressure"] * supply),
+                 "flow": (f"joints.{joint}.valve.rated_flow", spec.get(f"joints.{joint}.valve.rated_flow") * flow),
+                 "load": (f"effects.payload.{joint}.mass",
+                          next(e.params["mass"] for e in spec.effects if (e.name, e.joint) == ("payload", joint)))}
+        rig = work / "rig_measured"
+        shutil.copytree(work / "rig", rig)
+        measured(rig, dict(truth[k] for k in measured_keys))
     t0 = time.perf_counter()
-    cli("import", work / "log.csv", "--robot", work / "rig", "--out", work / "rec.csv", "--no-header",
+    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
-    cli("diagnose", "--robot", work / "rig", work / "rec.csv", "--report", work / "rep", "--quiet")
+    cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
     seconds = time.perf_counter() - t0
     d = json.loads((work / "rep" / "diagnosis.json").read_text())
     named = [s["effect"] for s in d["selected"]]
@@ -146,8 +156,15 @@ def main():
                     help="what the rig's controller tracks: operator-like steps with holds, or a slow sine (0.1-0.3 Hz)")
     ap.add_argument("--coulomb-share", type=float, default=0.06, metavar="SHARE",
                     help="the hidden Coulomb friction as a share of the full-pressure force (default 0.06)")
+    ap.add_argument("--measured", default="", metavar="KEYS",
+                    help="comma-separated, of supply, load, flow: the user measured these, so the rig's robot.toml "
+                         "says the truth's value and they leave its [estimated] table (held by calibration)")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
+    measured_keys = tuple(k for k in args.measured.split(",") if k)
+    if set(measured_keys) - {"supply", "load", "flow"}:
+        ap.error(f"--measured: unknown {', '.join(sorted(set(measured_keys) - {'supply', 'load', 'flow'}))}; "
+                 "known: supply, load, flow")
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
     cases = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
@@ -156,7 +173,7 @@ def main():
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
                                  args.log_every, tuple(args.rig_set), args.realistic, args.integral_time,
-                                 args.reference, args.coulomb_share)
+                                 args.reference, args.coulomb_share, measured_keys)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -178,6 +195,7 @@ def main():
           + (f"; PI control, integral time {args.integral_time:g} s" if args.integral_time else "")
           + ("; the set point a slow sine" if args.reference == "sine" else "")
           + (f"; Coulomb friction {args.coulomb_share:g} x the full-pressure force" if args.coulomb_share != 0.06 else "")
+          + (f"; measured (held at the truth's values): {', '.join(measured_keys)}" if measured_keys else "")
           + "; right = named alone within "
           f"{100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy)")
     for effect in args.effects.split(","):

@@ -8,6 +8,8 @@ a start pose off the template's. Only the CSV reaches `hydrohil import` and `dia
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from sim_core.kernel import layout as L
@@ -113,3 +115,37 @@ def logged_like_a_daq(rows: np.ndarray, rng, bits: int = 0, dropouts: int = 0, s
 
 def write_headerless(rows: np.ndarray, path) -> None:
     np.savetxt(path, rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
+
+
+def measured(rig_dir, keys: dict[str, float]) -> None:
+    """What a user does after measuring some of the rig's parameters: each key of ``keys`` (a
+    robot.toml path, e.g. ``supply.pressure``) is written with its measured value and its line leaves
+    the [estimated] table, so calibration holds it (README: "delete its line to hold it fixed")."""
+    import re
+    import tomllib
+
+    path = Path(rig_dir) / "robot.toml"
+    text = path.read_text()
+    for key, value in keys.items():
+        text = "\n".join(line for line in text.splitlines() if not line.startswith(f'"{key}"')) + "\n"
+        table, name = key.rsplit(".", 1)
+        if table.startswith("effects."):                       # [[effects]] name = "payload", joint = "lift"
+            _, effect, joint = table.split(".")
+            block = re.compile(rf'(\[\[effects\]\]\s*\nname = "{effect}"\s*\njoint = "{joint}"\s*\n(?:(?!\[).*\n)*?)'
+                               rf'{name} = [^#\n]*')
+        else:
+            block = re.compile(rf'(\[{re.escape(table)}\]\s*\n(?:(?!\[).*\n)*?){name} = [^#\n]*')
+        text, n = block.subn(lambda m: f"{m.group(1)}{name} = {value!r}  ", text, count=1)
+        if n != 1:
+            raise KeyError(f"{key}: not written in {path}")
+    data = tomllib.loads(text)
+    for key, value in keys.items():
+        parts = key.split(".")
+        if parts[0] == "effects":
+            node = next(e for e in data["effects"] if (e["name"], e["joint"]) == tuple(parts[1:3]))[parts[3]]
+        else:
+            node = data
+            for part in parts:
+                node = node[part]
+        assert node == value and key not in data.get("estimated", {}), key
+    path.write_text(text)

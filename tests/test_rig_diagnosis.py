@@ -12,7 +12,7 @@ import json
 
 import pytest
 
-from rig_records import as_record, closed_loop_record, reference_steps, sine_reference, write_headerless
+from rig_records import as_record, closed_loop_record, measured, reference_steps, sine_reference, write_headerless
 from sim_core.identification.calibration import plan
 from sim_core.identification.candidates import actuator_scales
 from sim_core.model.spec import load_robot
@@ -24,7 +24,9 @@ HIDDEN = {"deadband": ("width", 0.8), "valve_asymmetry": ("ratio", 0.7), "delay"
 
 
 def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1, rig_set=(), off_nominal=None,
-              reference=reference_steps):
+              reference=reference_steps, measure=()):
+    """``measure``: keys of the truth (``supply.pressure``, ``effects.payload.<j>.mass``) the user measured
+    and wrote into a copy of the rig, their [estimated] lines deleted; the diagnosis runs on that copy."""
     rig = tmp_path / "rig"
     cli("rig", "new", template, "--out", rig, *[a for kv in rig_set for a in ("--set", kv)], check=True)
     spec = load_robot(rig)
@@ -35,6 +37,12 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1, r
     rows, _ = closed_loop_record(rig, hidden=hidden, off=off, seed=seed, duration=60.0, start_offset=0.05 * span,
                                  rate=rate, log_every=log_every, reference=reference)
     write_headerless(rows, tmp_path / "log.csv")
+    if measure:
+        truth = {**{k: spec.get(k) * off.get(k, 1.0) for k in measure if not k.startswith("effects.")},
+                 **{f"effects.payload.{e.joint}.mass": e.params["mass"] for e in spec.effects if e.name == "payload"}}
+        rig = tmp_path / "rig_measured"
+        cli("rig", "new", template, "--out", rig, *[a for kv in rig_set for a in ("--set", kv)], check=True)
+        measured(rig, {k: truth[k] for k in measure})
     cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
     proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
@@ -233,3 +241,23 @@ def test_a_deadband_under_sine_tracking_is_named_with_the_load_carrying_the_supp
     assert fitted["parameters"][f"effects.payload.{j}.mass"]["identified"]
     angle = next(iter(fitted["fit"].values()))[j]["angle"]          # the one record (no --validation)
     assert angle["after"] > angle["before"] + 20.0, angle
+
+
+@pytest.mark.parametrize("template", ["cylinder", "rotary"])
+def test_coulomb_friction_is_named_once_the_supply_and_the_load_are_measured(cli, tmp_path, template):
+    """Without pressures a P loop shows friction only through the speeds it reaches each way per volt:
+    two figures, against a flow gain, a supply and a load that are each unknown and each trade
+    against a friction (bench_rig_diagnosis.py: 0 of 9 at 6 % of the full force). A user who reads
+    the supply off the pump's gauge and weighs the load writes both into robot.toml and deletes
+    their [estimated] lines; the flow gain is left to calibrate. Then a Coulomb friction of 6 % of
+    the full-pressure force is named alone within 15 %."""
+    cli("rig", "new", template, "--out", tmp_path / "sizing", check=True)
+    spec = load_robot(tmp_path / "sizing")
+    j = spec.joint_names[0]
+    torque = 0.06 * actuator_scales(spec, j)["torque"]
+    _, d = _diagnose(cli, tmp_path, template, ("coulomb_friction", {"torque": torque}),
+                     measure=("supply.pressure", f"effects.payload.{j}.mass"))
+    held = load_robot(tmp_path / "rig_measured").estimated
+    assert "supply.pressure" not in held and f"joints.{j}.valve.rated_flow" in held      # the premise
+    assert [s["effect"] for s in d["selected"]] == ["coulomb_friction"], (d["verdict"], d["selected"])
+    assert d["selected"][0]["params"]["torque"] == pytest.approx(torque, rel=0.15)
