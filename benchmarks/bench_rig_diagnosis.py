@@ -17,7 +17,7 @@ hidden effect as its runner-up is counted apart (the report then says what would
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
         [--first-seed 1] [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
-        [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--measured supply,load,flow]
+        [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--measured supply,load,flow,sensor]
         [--json FILE]
 
 About 25 s per case on this 2-core VM (21 cases per seed with the defaults).
@@ -97,13 +97,14 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     write_headerless(rows, work / "log.csv")
     rig = work / "rig"
     if measured_keys:           # the user measured these: the truth's values written in, held by calibration
-        truth = {"supply": ("supply.pressure", spec.supply["pressure"] * supply),
-                 "flow": (f"joints.{joint}.valve.rated_flow", spec.get(f"joints.{joint}.valve.rated_flow") * flow),
-                 "load": (f"effects.payload.{joint}.mass",
-                          next(e.params["mass"] for e in spec.effects if (e.name, e.joint) == ("payload", joint)))}
+        truth = {"supply": {"supply.pressure": spec.supply["pressure"] * supply},
+                 "flow": {f"joints.{joint}.valve.rated_flow": spec.get(f"joints.{joint}.valve.rated_flow") * flow},
+                 "load": {f"effects.payload.{joint}.mass":
+                          next(e.params["mass"] for e in spec.effects if (e.name, e.joint) == ("payload", joint))},
+                 "sensor": {f"joints.{joint}.sensor.{k}": spec.get(f"joints.{joint}.sensor.{k}") for k in "AB"}}
         rig = work / "rig_measured"
         shutil.copytree(work / "rig", rig)
-        measured(rig, dict(truth[k] for k in measured_keys))
+        measured(rig, {k: v for name in measured_keys for k, v in truth[name].items()})
     t0 = time.perf_counter()
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
@@ -157,14 +158,14 @@ def main():
     ap.add_argument("--coulomb-share", type=float, default=0.06, metavar="SHARE",
                     help="the hidden Coulomb friction as a share of the full-pressure force (default 0.06)")
     ap.add_argument("--measured", default="", metavar="KEYS",
-                    help="comma-separated, of supply, load, flow: the user measured these, so the rig's robot.toml "
+                    help="comma-separated, of supply, load, flow, sensor (its A and B): the user measured these, so the rig's robot.toml "
                          "says the truth's value and they leave its [estimated] table (held by calibration)")
     ap.add_argument("--json", metavar="FILE", help="also write the cases as JSON")
     args = ap.parse_args()
     measured_keys = tuple(k for k in args.measured.split(",") if k)
-    if set(measured_keys) - {"supply", "load", "flow"}:
-        ap.error(f"--measured: unknown {', '.join(sorted(set(measured_keys) - {'supply', 'load', 'flow'}))}; "
-                 "known: supply, load, flow")
+    unknown = set(measured_keys) - {"supply", "load", "flow", "sensor"}
+    if unknown:
+        ap.error(f"--measured: unknown {', '.join(sorted(unknown))}; known: supply, load, flow, sensor")
     tmp = Path(tempfile.mkdtemp(prefix="bench_rig_"))
     cases = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):

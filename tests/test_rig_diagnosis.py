@@ -5,7 +5,8 @@ operator-like steps; the truth has the valve 20 % larger and the supply 15 % low
 robot.toml says, starts 5 % of the stroke off the template's initial position, and is logged at
 50 Hz with jittered timestamps, the position in sensor volts and no pressures. Only the headerless
 log reaches the commands under test. A hidden deadband, valve asymmetry, delay or valve null offset
-is named with its parameter within 15 % on every template; a clean record is no_significant_discrepancy.
+is named with its parameter within 15 % on every template; a clean record is no_significant_discrepancy;
+a Coulomb friction is named where the user measured the supply and the load.
 """
 
 import json
