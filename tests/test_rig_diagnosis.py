@@ -82,8 +82,12 @@ def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, request, tem
 
 @pytest.mark.parametrize("template", list(TEMPLATES))
 def test_a_clean_record_of_an_off_nominal_rig_is_no_discrepancy(cli, tmp_path, template):
-    _, d = _diagnose(cli, tmp_path, template, None)
+    j, d = _diagnose(cli, tmp_path, template, None)
     assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+    # what that verdict cannot vouch for on a position-only log with the supply estimated
+    spots = d["calibration"]["blind_spots"]
+    assert len(spots) == 1 and spots[0].startswith(f"{j}: a Coulomb friction") and "supply.pressure" in spots[0]
+    assert (tmp_path / "stdout.txt").read_text().count("not testable: ") == 1
 
 
 def test_a_log_slower_than_its_controller_is_unexplained_with_the_replay_as_a_cause(cli, tmp_path):
@@ -262,3 +266,4 @@ def test_coulomb_friction_is_named_once_the_supply_and_the_load_are_measured(cli
     assert "supply.pressure" not in held and f"joints.{j}.valve.rated_flow" in held      # the premise
     assert [s["effect"] for s in d["selected"]] == ["coulomb_friction"], (d["verdict"], d["selected"])
     assert d["selected"][0]["params"]["torque"] == pytest.approx(torque, rel=0.15)
+    assert d["calibration"]["blind_spots"] == []

@@ -89,6 +89,8 @@ def run(args):
         print(f"  unexplained: {why}")
     for cause in (d.unexplained or {}).get("record_causes", []):
         print(f"  in the record: {cause}")
+    for spot in d.calibration.get("blind_spots", []):
+        print(f"  not testable: {spot}")
     for j, f in d.baseline_fits.items():
         if f.get("excited", True):
             print(f"  fit {j}: {f['angle']:.2f} % -> {d.extended_fits[j]['angle']:.2f} %")

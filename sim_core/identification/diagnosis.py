@@ -27,7 +27,7 @@ import numpy as np
 
 from ..dataset import column_unit
 from . import output_error as oe
-from . import command_null, conditional, held_at_extreme, polarity
+from . import blind_spots, command_null, conditional, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
@@ -458,6 +458,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         selected, sel.accepted = [], []
         ext_acc, ext_out, ext_fits = base_acc, base_out, base_fits
         tests["extended"] = tests["baseline"]
+    calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
+                                                {(s["effect"], s["joint"]) for s in selected})
+    notes.extend(calib["blind_spots"])
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
