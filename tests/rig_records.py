@@ -135,7 +135,7 @@ def measured(rig_dir, keys: dict[str, float]) -> None:
                                rf'{name} = [^#\n]*')
         else:
             block = re.compile(rf'(\[{re.escape(table)}\]\s*\n(?:(?!\[).*\n)*?){name} = [^#\n]*')
-        text, n = block.subn(lambda m: f"{m.group(1)}{name} = {value!r}  ", text, count=1)
+        text, n = block.subn(lambda m: f"{m.group(1)}{name} = {float(value)!r}  ", text, count=1)
         if n != 1:
             raise KeyError(f"{key}: not written in {path}")
     data = tomllib.loads(text)
