@@ -189,6 +189,8 @@ def _estimated_section(toml_text: str, urdf_text: str, urdf_name: str, joint: st
             "# ---- Parameters you probably do not know exactly. The values above are estimates; calibration",
             "# ('hydrohil fit', the baseline of 'hydrohil diagnose') may move each within [lower, upper] (same unit",
             "# as above). Narrow a range when you have measured the value, delete its line to hold it fixed.",
+            "# Each line deleted is one number the record no longer has to explain: on a log without chamber",
+            "# pressures a Coulomb friction shows only once the supply pressure and the load are measured.",
             "[estimated]"]
     for path, rule, what in ESTIMATED:
         path = path.format(joint=joint, actuator=actuator)
