@@ -16,7 +16,7 @@ hidden effect as its runner-up is counted apart (the report then says what would
 
     .venv/bin/python benchmarks/bench_rig_diagnosis.py [--templates cylinder,boom,rotary]
         [--effects deadband,valve_asymmetry,coulomb_friction,leakage,delay,valve_offset,none] [--seeds 1]
-        [--first-seed 1] [--flow 1.2] [--supply 0.85] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
+        [--first-seed 1] [--flow 1.2] [--supply 0.85] [--off PATH=FACTOR ...] [--rate 50] [--log-every 1] [--rig-set KNOB=VALUE ...] [--realistic]
         [--integral-time S] [--reference steps|sine] [--coulomb-share 0.06] [--measured supply,load,flow,sensor]
         [--json FILE]
 
@@ -78,7 +78,8 @@ REFERENCES = {"steps": reference_steps, "sine": sine_reference}
 
 def run_case(work: Path, template: str, effect: str, seed: int, flow: float, supply: float, log_every: int = 1,
              rig_set: tuple[str, ...] = (), realistic: bool = False, ti: float | None = None,
-             reference: str = "steps", coulomb_share: float = 0.06, measured_keys: tuple[str, ...] = ()) -> dict:
+             reference: str = "steps", coulomb_share: float = 0.06, measured_keys: tuple[str, ...] = (),
+             more_off: tuple[str, ...] = (), rate: float = 50.0) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     cli("rig", "new", template, "--out", work / "rig", *[a for s in rig_set for a in ("--set", s)])
@@ -88,8 +89,11 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     span = float(spec.tree.upper[i] - spec.tree.lower[i])
     params = hidden_params(effect, spec, joint, coulomb_share)
     off = {f"joints.{joint}.valve.rated_flow": flow, "supply.pressure": supply}
+    for item in more_off:       # PATH=FACTOR, {joint} and {actuator} filled in for this rig
+        path, factor = item.split("=")
+        off[path.format(joint=joint, actuator=spec.joint(joint).kind)] = float(factor)
     rows, _ = closed_loop_record(work / "rig", hidden=None if params is None else (effect, params), off=off,
-                                 seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every,
+                                 seed=seed, duration=60.0, start_offset=0.05 * span, log_every=log_every, rate=rate,
                                  extra=realistic_truth(spec, joint) if realistic else (), ti=ti,
                                  reference=REFERENCES[reference])
     if realistic:
@@ -144,8 +148,12 @@ def main():
     ap.add_argument("--first-seed", type=int, default=1, help="start the seeds here (FIRST..FIRST+N-1)")
     ap.add_argument("--flow", type=float, default=1.2, help="the rig's valve flow against its spec (factor)")
     ap.add_argument("--supply", type=float, default=0.85, help="the rig's supply pressure against its spec (factor)")
+    ap.add_argument("--off", action="append", default=[], metavar="PATH=FACTOR",
+                    help="another parameter of the truth off its spec by this factor, e.g. fluid.bulk_modulus=0.7 or "
+                         "joints.{joint}.{actuator}.viscous_friction=1.3 (repeatable)")
+    ap.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="the log's rate (default 50 Hz)")
     ap.add_argument("--log-every", type=int, default=1, metavar="M",
-                    help="the rig's controller runs at M x the log's 50 Hz and the log keeps every M-th sample")
+                    help="the rig's controller runs at M x the log's rate and the log keeps every M-th sample")
     ap.add_argument("--rig-set", action="append", default=[], metavar="KNOB=VALUE",
                     help="passed to 'rig new --set' (e.g. incline_deg=-90: a load hanging below the cylinder)")
     ap.add_argument("--realistic", action="store_true",
@@ -174,7 +182,7 @@ def main():
                 try:
                     c = run_case(tmp / f"{template}_{effect}_{seed}", template, effect, seed, args.flow, args.supply,
                                  args.log_every, tuple(args.rig_set), args.realistic, args.integral_time,
-                                 args.reference, args.coulomb_share, measured_keys)
+                                 args.reference, args.coulomb_share, measured_keys, tuple(args.off), args.rate)
                 except Exception as exc:  # a case that fails is a finding, not the end of the run
                     c = {"template": template, "effect": effect, "seed": seed, "right": False, "failed": str(exc)}
                 cases.append(c)
@@ -190,6 +198,8 @@ def main():
                 print(f"{template:9s} {effect:17s} seed {seed}: {'RIGHT' if c['right'] else 'wrong'}  {c['verdict']}: "
                       f"{named}{amb}{err}; fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     print(f"\nrig off nominal: valve flow x{args.flow:g}, supply x{args.supply:g}"
+          + "".join(f", {o.replace('=', ' x')}" for o in args.off)
+          + (f"; logged at {args.rate:g} Hz" if args.rate != 50.0 else "")
           + (f"; controller at {args.log_every} x the log's rate" if args.log_every > 1 else "")
           + (f"; rig new --set {' '.join(args.rig_set)}" if args.rig_set else "")
           + ("; realistic: Stribeck seal friction in the truth, 12-bit volts, 3 dropouts" if args.realistic else "")

@@ -267,3 +267,21 @@ def test_coulomb_friction_is_named_once_the_supply_and_the_load_are_measured(cli
     assert [s["effect"] for s in d["selected"]] == ["coulomb_friction"], (d["verdict"], d["selected"])
     assert d["selected"][0]["params"]["torque"] == pytest.approx(torque, rel=0.15)
     assert d["calibration"]["blind_spots"] == []
+
+
+def test_a_recalibration_sends_what_it_cannot_identify_back_to_the_spec_not_to_the_baseline(cli, tmp_path):
+    """The boom rig under a 10 Hz P loop with a 0.25 V valve null offset. Without the offset in the
+    model the baseline calibration explains the creep with a sensor offset of about 0.3 rad, which
+    it identifies. Once the valve offset is named the calibration is redone: the sensor offset is then
+    not identified (|value/sigma| < 1). Sent back to the baseline's 0.3 rad, the model stayed 11
+    points under its noise ceiling and the verdict was unexplained_discrepancy. Sent back to the
+    spec's value (no offset), the valve offset is named within 15 % and the model fits to its ceiling."""
+    j, d = _diagnose(cli, tmp_path, "boom", ("valve_offset", {"offset": 0.25}), seed=1, rate=10.0)
+    base = {c["parameter"]: c for c in d["calibration"]["changes"]}
+    key = f"effects.sensor_offset.{j}.offset"
+    assert base[key]["identified"] and abs(base[key]["value"]) > 0.1          # the premise: the stand-in
+    again = {c["parameter"]: c for c in d["calibration"]["recalibrations"][0]["changes"]}
+    assert not again[key]["identified"] and again[key]["value"] == again[key]["nominal"] == 0.0
+    assert [s["effect"] for s in d["selected"]] == ["valve_offset"], (d["verdict"], d["selected"])
+    assert d["selected"][0]["params"]["offset"] == pytest.approx(0.25, rel=0.15)
+    assert d["extended"]["fit"][j] >= d["decision"]["channel_ceilings"][j]["angle"] - 1.0

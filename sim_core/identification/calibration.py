@@ -285,17 +285,18 @@ SCAN_FACTORS = (0.5, 0.63, 0.8, 0.9, 1.1, 1.25, 1.6, 2.0)
 
 def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None = None, *, span: float = 10.0,
               max_sims: int = 40, uncertainty: bool = True, free: list[FreeParameter] | None = None,
-              why: dict[str, str] | None = None) -> Calibration:
+              why: dict[str, str] | None = None, nominal: dict[str, float] | None = None) -> Calibration:
     """Fit ``keys`` (or the ready ``free`` parameters, e.g. a :class:`Plan`'s) of ``spec`` (a model
     spec) on the problem's channels, flow gains from the best point of a coarse scan; then check each
     one's identifiability (see the module docstring), reset those the record cannot identify to
     their nominal values and refit the rest. ``changes`` rows: parameter, nominal, fitted, sigma,
     identified, value (what the calibrated spec holds), unit, why (freed) and, when not identified,
-    the reason."""
+    the reason. ``nominal``: the values a parameter goes back to (default: its value in ``spec``, where
+    the fit also starts)."""
     if free is None:
         free = [free_parameter(spec, k, span=span) for k in keys or []]
     keys = [fp.key for fp in free]
-    nominal = {fp.key: fp.get(spec) for fp in free}
+    nominal = {fp.key: (nominal[fp.key] if nominal and fp.key in nominal else fp.get(spec)) for fp in free}
     start = scan_flow_gains(spec, runner, problem, keys)
     budget = max_sims + 4 * max(0, len(free) - len([k for k in keys if is_baseline(k)]))
     res = oe.fit(runner, problem, start, free, max_sims=budget, uncertainty=uncertainty)

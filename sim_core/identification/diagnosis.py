@@ -245,12 +245,16 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # nothing calibrated is identified; once an effect is named the calibration is redone with it in
     # the model, and what it identifies then is refitted with the candidates that follow
     pending = [c["parameter"] for c in cal.changes if not c["identified"]]
+    uncalibrated = {c["parameter"]: c["nominal"] for c in cal.changes}
     recalibrations: list[dict] = []
 
     def recalibrate(model, ev):
         if not pending:
             return model
-        again = calibrate(model, fast, est, free=pl.free, why=pl.why)
+        # started where the baseline ended; a parameter this calibration cannot identify goes back to
+        # the spec's value, not to the baseline's: that may have stood in for the effect now in the
+        # model (a 0.3 rad sensor offset for a valve offset)
+        again = calibrate(model, fast, est, free=pl.free, why=pl.why, nominal=uncalibrated)
         newly = [k for k in again.identified if k in pending]
         recalibrations.append({"after": ev.candidate.label, "identified": again.identified, "newly_identified": newly,
                                "changes": again.changes})
