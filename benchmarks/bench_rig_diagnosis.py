@@ -41,7 +41,7 @@ from rig_records import closed_loop_record, logged_like_a_daq, measured, referen
 
 from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
-from sim_core.model.spec import load_robot  # noqa: E402
+from sim_core.model.spec import estimable, load_robot  # noqa: E402
 
 TOLERANCE = 0.15
 
@@ -101,14 +101,11 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     write_headerless(rows, work / "log.csv")
     rig = work / "rig"
     if measured_keys:           # the user measured these: the truth's values written in, held by calibration
-        truth = {"supply": {"supply.pressure": spec.supply["pressure"] * supply},
-                 "flow": {f"joints.{joint}.valve.rated_flow": spec.get(f"joints.{joint}.valve.rated_flow") * flow},
-                 "load": {f"effects.payload.{joint}.mass":
-                          next(e.params["mass"] for e in spec.effects if (e.name, e.joint) == ("payload", joint))},
-                 "sensor": {f"joints.{joint}.sensor.{k}": spec.get(f"joints.{joint}.sensor.{k}") for k in "AB"}}
+        paths = {"supply": ["supply.pressure"], "flow": [f"joints.{joint}.valve.rated_flow"],
+                 "load": [f"effects.payload.{joint}.mass"], "sensor": [f"joints.{joint}.sensor.{k}" for k in "AB"]}
         rig = work / "rig_measured"
         shutil.copytree(work / "rig", rig)
-        measured(rig, {k: v for name in measured_keys for k, v in truth[name].items()})
+        measured(rig, {k: estimable(spec, k)[1] * off.get(k, 1.0) for name in measured_keys for k in paths[name]})
     t0 = time.perf_counter()
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")

@@ -122,7 +122,8 @@ def measured(rig_dir, keys: dict[str, float]) -> None:
     robot.toml path, e.g. ``supply.pressure``) is written with its measured value and its line leaves
     the [estimated] table, so calibration holds it (README: "delete its line to hold it fixed")."""
     import re
-    import tomllib
+
+    from sim_core.model.spec import estimable, load_robot
 
     path = Path(rig_dir) / "robot.toml"
     text = path.read_text()
@@ -138,14 +139,7 @@ def measured(rig_dir, keys: dict[str, float]) -> None:
         text, n = block.subn(lambda m: f"{m.group(1)}{name} = {float(value)!r}  ", text, count=1)
         if n != 1:
             raise KeyError(f"{key}: not written in {path}")
-    data = tomllib.loads(text)
-    for key, value in keys.items():
-        parts = key.split(".")
-        if parts[0] == "effects":
-            node = next(e for e in data["effects"] if (e["name"], e["joint"]) == tuple(parts[1:3]))[parts[3]]
-        else:
-            node = data
-            for part in parts:
-                node = node[part]
-        assert node == value and key not in data.get("estimated", {}), key
     path.write_text(text)
+    spec = load_robot(rig_dir)
+    for key, value in keys.items():
+        assert estimable(spec, key)[1] == float(value) and key not in spec.estimated, key

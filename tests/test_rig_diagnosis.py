@@ -10,13 +10,14 @@ a Coulomb friction is named where the user measured the supply and the load.
 """
 
 import json
+import shutil
 
 import pytest
 
 from rig_records import as_record, closed_loop_record, measured, reference_steps, sine_reference, write_headerless
 from sim_core.identification.calibration import plan
 from sim_core.identification.candidates import actuator_scales
-from sim_core.model.spec import load_robot
+from sim_core.model.spec import estimable, load_robot
 from sim_core.rigs import TEMPLATES
 
 OFF = {"valve.rated_flow": 1.2, "supply.pressure": 0.85}
@@ -39,11 +40,9 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1, r
                                  rate=rate, log_every=log_every, reference=reference)
     write_headerless(rows, tmp_path / "log.csv")
     if measure:
-        truth = {**{k: spec.get(k) * off.get(k, 1.0) for k in measure if not k.startswith("effects.")},
-                 **{f"effects.payload.{e.joint}.mass": e.params["mass"] for e in spec.effects if e.name == "payload"}}
+        shutil.copytree(rig, tmp_path / "rig_measured")
         rig = tmp_path / "rig_measured"
-        cli("rig", "new", template, "--out", rig, *[a for kv in rig_set for a in ("--set", kv)], check=True)
-        measured(rig, {k: truth[k] for k in measure})
+        measured(rig, {k: estimable(spec, k)[1] * off.get(k, 1.0) for k in measure})
     cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header",
         "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
     proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
