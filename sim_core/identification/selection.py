@@ -40,7 +40,7 @@ from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop,
-                       stand_in)
+                       simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, free_parameter
 from .progress import RoundProgress
@@ -429,6 +429,16 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             if fp.key not in st.calib_keys:
                 st.calib_keys.append(fp.key)
             stopped += f"; {fp.key} calibrated in place of {ev.candidate.label} (= {value:.4g})"
+    if accepted:
+        def refit_at_null(model, ev, p):
+            res = _refit_at_null(st, model, accepted, ev, p)
+            if not res.ok:
+                return model, -math.inf, {}
+            return res.spec, base.score(res.spec), res.values
+
+        model, _, held = simpler_parameters(accepted, model, base.score(model), refit_at_null=refit_at_null, log=log)
+        for ev, p, _ in held:
+            stopped += f"; {ev.candidate.label}: {p.key.split('.')[-1]} held at {p.null:g}, not worth a parameter"
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
@@ -473,6 +483,17 @@ def _refit_rest(st: Setting, base_spec, model, ev: Evaluation, rest: list[Evalua
     grid = [x0[:-1] + [instead.from_x(instead.to_x(x0[-1] * f))] for f in (1.0, 0.8, 1.25)]
     return oe.fit(st.est_runner, st.est, minus, free, grid=grid, grid_problem=st.grid,
                   max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
+
+
+def _refit_at_null(st: Setting, model, accepted: list[Evaluation], ev: Evaluation, p: FreeParameter) -> oe.FitResult:
+    """``model`` with ``ev``'s parameter ``p`` at its null and the other parameters of the named
+    effects and the calibration refitted (simpler_parameters)."""
+    at_null = model.copy()
+    p.apply(at_null, p.null)
+    named = [(replace(e.candidate, free=[fp for fp in e.candidate.free if fp.key != p.key]) if e is ev else e.candidate,
+              e.effect_params()) for e in accepted]
+    free = free_list(at_null, None, named, st.calib_keys, st.ranges)
+    return oe.fit(st.est_runner, st.est, at_null, free, max_sims=st.budget(len(free)), uncertainty=False, tol=1e-3)
 
 
 def _extend(model, ev: Evaluation, recalibrate):
