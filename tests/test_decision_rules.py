@@ -3,7 +3,7 @@
 Each test sets up scores on both sides of one rule, so deleting or inverting the rule fails it:
 acceptance (gain threshold, noise spread, BIC, search bound, 3-sigma identifiability), forward
 selection (best passing wins; a masked effect is re-evaluated next round; stop at the noise
-ceiling), the masked-pair search, backward pass, a named effect's parameters held at their null, final check, ambiguity and ``decided_by``, the verdict with its residual
+ceiling), the masked-pair search, backward pass, a named effect's secondary parameters held at their default, final check, ambiguity and ``decided_by``, the verdict with its residual
 evidence, and the readable gain scale.
 """
 
@@ -330,57 +330,58 @@ def test_the_pair_search_skipped_at_the_ceiling_runs_once_the_final_check_drops_
 # ---- a named effect's parameters ----------------------------------------------------------------------
 LEAK = cand("leakage", "swing", (("internal", 1e-15, 3e-10, 0.0), ("external", 1e-16, 1e-10, 0.0)))
 K_INT, K_EXT = (fp.key for fp in LEAK.free)
+DEFAULTS = {"internal": 2e-12, "external": 0.0}
 
 
 def leak(internal=2e-13, external=1e-13):
     return scored(LEAK, values={K_INT: internal, K_EXT: external, "joints.swing.valve.rated_flow": 6e-5})
 
 
-def test_droppable_tries_the_secondary_parameters_first_and_skips_those_without_a_null_or_at_it():
-    assert [fp.key for fp in dc.droppable(leak())] == [K_EXT, K_INT]
-    assert [fp.key for fp in dc.droppable(leak(external=0.0))] == [K_INT]          # already where it vanishes
-    assert [fp.key for fp in dc.droppable(leak(external=1e-16))] == [K_INT]        # at its bound on the null's side
-    assert dc.droppable(scored(cand())) == []                                      # one parameter: nothing to drop
-    no_null = cand("joint_compliance", "j2", (("frequency", 0.3, 60.0, math.inf), ("damping_ratio", 0.01, 1.5, math.nan)))
-    assert dc.droppable(scored(no_null)) == []
+def default(ev, p):
+    return DEFAULTS[p.key.split(".")[-1]]
 
 
-def test_a_parameter_not_worth_the_threshold_is_held_at_its_null_and_the_rest_keeps_the_refit():
+def test_only_the_secondary_parameters_are_tried_last_to_first():
+    three = cand("x", "j", (("a", 0.0, 1.0, 0.0), ("b", 0.0, 1.0, 0.0), ("c", 0.0, 1.0, 0.0)))
+    assert [fp.key.split(".")[-1] for fp in dc.secondary(scored(three))] == ["c", "b"]
+    assert dc.secondary(scored(cand())) == []                      # one parameter: the effect itself
+
+
+def test_a_secondary_parameter_not_worth_the_threshold_is_held_at_its_default_and_the_rest_keeps_the_refit():
     ev = leak()
     asked = []
 
-    def refit_at_null(model, e, p):
-        asked.append(p.key)
+    def refit_held(model, e, p, value):
+        asked.append((p.key, value))
         # the record shows the total leak: without the external one the internal one takes it all
         return "internal only", 90.0 - 0.3, {K_INT: 2.6e-13, "joints.swing.valve.rated_flow": 6.1e-5}
 
-    model, score, held = dc.simpler_parameters([ev], "both", 90.0, refit_at_null=refit_at_null)
-    assert asked == [K_EXT]                  # one parameter stays: the principal is not tried alone
+    model, score, held = dc.simpler_parameters([ev], "both", 90.0, default=default, refit_held=refit_held)
+    assert asked == [(K_EXT, 0.0)]           # the principal is never tried
     assert model == "internal only" and score == pytest.approx(89.7)
-    assert [(e, p.key) for e, p, _ in held] == [(ev, K_EXT)]
+    assert [(e, p.key, v) for e, p, v, _ in held] == [(ev, K_EXT, 0.0)]
     assert [fp.key for fp in ev.candidate.free] == [K_INT]
-    assert ev.candidate.fixed["external"] == 0.0 and ev.held_at_null == {"external": 0.0}
+    assert ev.candidate.fixed["external"] == 0.0 and ev.held_at_default == {"external": 0.0}
     assert ev.effect_params() == {"internal": 2.6e-13, "external": 0.0}
     assert ev.values["joints.swing.valve.rated_flow"] == 6.1e-5 and K_EXT not in ev.values
 
 
-def test_a_parameter_worth_the_threshold_stays_and_the_next_one_is_tried():
-    ev = leak()
+def test_a_secondary_parameter_worth_the_threshold_or_already_at_its_default_stays_free():
     asked = []
 
-    def refit_at_null(model, e, p):
+    def refit_held(model, e, p, value):
         asked.append(p.key)
-        return "less", {K_EXT: 90.0 - dc.THRESHOLD_POINTS, K_INT: 90.0 - 0.1}[p.key], {K_EXT: 3e-13}
+        return "less", 90.0 - dc.THRESHOLD_POINTS, {}
 
-    model, score, held = dc.simpler_parameters([ev], "both", 90.0, refit_at_null=refit_at_null)
-    assert asked == [K_EXT, K_INT]          # the external leak is worth 2 points: kept; then the internal one
-    assert [p.key for _, p, _ in held] == [K_INT] and ev.held_at_null == {"internal": 0.0}
-    assert ev.effect_params() == {"external": 3e-13, "internal": 0.0}
-    # both worth it: nothing changes
-    ev2 = leak()
-    model, score, held = dc.simpler_parameters([ev2], "both", 90.0,
-                                               refit_at_null=lambda m, e, p: ("less", 85.0, {}))
-    assert held == [] and model == "both" and score == 90.0 and len(ev2.candidate.free) == 2
+    ev = leak()
+    model, score, held = dc.simpler_parameters([ev], "both", 90.0, default=default, refit_held=refit_held)
+    assert asked == [K_EXT] and held == [] and model == "both" and score == 90.0
+    assert len(ev.candidate.free) == 2 and ev.held_at_default == {}
+    at_default = leak(external=0.0)
+    dc.simpler_parameters([at_default], "both", 90.0, default=default, refit_held=refit_held)
+    no_default = leak()
+    dc.simpler_parameters([no_default], "both", 90.0, default=lambda ev, p: None, refit_held=refit_held)
+    assert asked == [K_EXT]                  # neither is refitted
 
 
 # ---- backward pass and final check ----------------------------------------------------------------

@@ -189,9 +189,10 @@ def test_a_leak_the_record_cannot_split_is_given_whole_to_the_cross_port_leak(cl
     """An internal (cross-port) leak on the rotary rig at seed 2. Without chamber pressures a leak
     across the vanes and one from each chamber to tank slow the motor alike; the candidate fits both,
     and the split followed the noise: the cross-port coefficient came 22 % low, with a leak to tank
-    beside it. A named effect's parameter must now be worth the threshold as the effect is: held at
-    zero with the rest refitted, the leak to tank costs a fraction of a point, so it stays there, the
-    report says so, and the cross-port coefficient carries the whole leak, within 15 %."""
+    beside it. A named effect's secondary parameter must now be worth the threshold as the effect is:
+    held at the effect's default (none to tank) with the rest refitted, the leak to tank costs a
+    fraction of a point, so it stays there, the report says so, and the cross-port coefficient
+    carries the whole leak, within 15 %."""
     cli("rig", "new", "rotary", "--out", tmp_path / "sizing", check=True)
     spec = load_robot(tmp_path / "sizing")
     leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
@@ -200,8 +201,8 @@ def test_a_leak_the_record_cannot_split_is_given_whole_to_the_cross_port_leak(cl
     named = d["selected"][0]
     assert named["params"]["internal"] == pytest.approx(leak, rel=0.15, abs=0), named["params"]
     assert named["params"]["external"] == 0.0
-    assert list(named["held_at_null"]) == ["external"] and named["held_at_null"]["external"]["value"] == 0.0
-    assert "external held at 0" in (tmp_path / "stdout.txt").read_text()
+    assert list(named["held_at_default"]) == ["external"] and named["held_at_default"]["external"]["value"] == 0.0
+    assert "external held at its default 0" in (tmp_path / "stdout.txt").read_text()
     assert "<b>Held</b>: external = 0" in (tmp_path / "rep" / "report.html").read_text()
 
 

@@ -83,8 +83,8 @@ def run(args):
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
         flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
-        for name, h in s.get("held_at_null", {}).items():
-            print(f"    {name} held at {h['value']:g}: the record does not show it apart from the effect's other parameters")
+        for name, h in s.get("held_at_default", {}).items():
+            print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
         for line in conditional.describe(s):
             print(f"    {line}")
     for why in (d.unexplained or {}).get("because", []):

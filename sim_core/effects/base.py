@@ -129,7 +129,9 @@ class Effect:
     def candidate(cls, spec, joint: str | None, scales: dict, guess: dict, current: dict | None) -> dict | None:
         """How the diagnosis fits this effect on ``joint``: {'free': [(param, lower, upper, log,
         null, unit)], 'fixed': {param: value}, 'grid': [[start values of the free params]]}, or None
-        (not fittable). ``scales``: the actuator's full-pressure torque, full valve flow, area ratio;
+        (not fittable). The first free parameter is the effect's principal one: a named effect's others
+        are held at their ``PARAMETERS`` default (the typical value) where the record does not show
+        them apart from it (``decision.simpler_parameters``). ``scales``: the actuator's full-pressure torque, full valve flow, area ratio;
         ``guess``: initial values from the residual signatures; ``current``: the effect's parameters
         when the model already has it (its parameters are then refitted from there)."""
         return None

@@ -86,7 +86,7 @@ class Evaluation:
     base_score: float = math.nan              # the model it is compared with, on the same joints
     pair: Evaluation | None = None            # a member of a pair named together: the pair's evaluation
     in_place_of: Evaluation | None = None     # a rival of the exchange pass: the accepted effect it was fitted for
-    held_at_null: dict[str, float] = field(default_factory=dict)   # parameters set where they vanish (simpler_parameters)
+    held_at_default: dict[str, float] = field(default_factory=dict)   # parameters the record does not show (simpler_parameters)
 
     @property
     def accepted_ok(self) -> bool:
@@ -101,10 +101,10 @@ class Evaluation:
         return residual_explained_pct(self.gain, self.base_score)
 
     def effect_params(self) -> dict[str, float]:
-        """The candidate's own parameters (effect keys), by parameter name; those held at their null
-        (:func:`simpler_parameters`) at that value."""
+        """The candidate's own parameters (effect keys), by parameter name; those held at their
+        default (:func:`simpler_parameters`) at that value."""
         out = {fp.key.split(".")[-1]: self.values[fp.key] for fp in self.candidate.free}
-        return {**out, **self.held_at_null}
+        return {**out, **self.held_at_default}
 
 
 # ---- readable scale ---------------------------------------------------------------------------------
@@ -422,55 +422,44 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
     return model, accepted, found
 
 
-def droppable(ev: Evaluation) -> list:
-    """The parameters of ``ev``'s effect that :func:`simpler_parameters` tries at their null, in order:
-    the secondary ones last to first, then the principal (an effect declares it first: the common
-    mode, cross-port leakage before leakage to tank). Only a parameter with a null (the value where
-    its part of the effect vanishes) that its fit left away from it; none for an effect with one."""
-    free = list(ev.candidate.free)
-    if len(free) < 2:
-        return []
-    out = []
-    for fp in free[1:][::-1] + free[:1]:
-        null = fp.null
-        if null is None or not math.isfinite(null):
-            continue
-        v = ev.values.get(fp.key, null)
-        side = null_side(fp.lower, fp.upper, null)
-        if v == null or (side == "lower" and v <= fp.lower) or (side == "upper" and v >= fp.upper):
-            continue
-        out.append(fp)
-    return out
+def secondary(ev: Evaluation) -> list:
+    """The parameters of ``ev``'s effect that :func:`simpler_parameters` tries at their default, last
+    to first: all but the first, the effect's principal one (a leak across the piston before one to
+    tank, the bulk modulus before its entrained-air softening)."""
+    return list(ev.candidate.free[1:])[::-1]
 
 
-def simpler_parameters(accepted: list[Evaluation], model, full: float, *, refit_at_null: Callable, log=None):
-    """A named effect's parameter must be worth the threshold as the effect is: set where its part of
-    the effect vanishes, the rest refitted (``refit_at_null(model, ev, p)`` -> (that model, its score,
-    its fitted values)), the validation score must lose THRESHOLD_POINTS, or it stays there. Two
-    parameters the record cannot tell apart (a leak across the piston and one to tank, on a record
-    without chamber pressures) then give one value for the leak the record shows, in the effect's
-    principal parameter, instead of a split the noise decides. Tried per :func:`droppable`, one
-    parameter kept at least. Returns (model, its score, [(ev, parameter, score with it held)]);
-    each ``ev`` held there keeps ``held_at_null`` and a candidate without that parameter."""
+def simpler_parameters(accepted: list[Evaluation], model, full: float, *, default: Callable, refit_held: Callable,
+                       log=None):
+    """A named effect's secondary parameter must be worth the threshold as the effect is: held at the
+    effect's default (``default(ev, p)``: its typical value, none to tank for a leak, or None where it
+    has none) with the rest refitted (``refit_held(model, ev, p, value)`` -> (that model, its score,
+    its fitted values)), the validation score must lose THRESHOLD_POINTS, or it stays held, as the
+    calibration keeps at nominal what the record does not identify. Two parameters the record cannot
+    tell apart (a leak across the piston and one to tank, on a record without chamber pressures)
+    then give one value for the leak the record shows, in the principal parameter, instead of a split
+    the noise decides. Returns (model, its score, [(ev, parameter, value, score with it held)]); each
+    ``ev`` held there keeps ``held_at_default`` and a candidate without that parameter."""
     log = log or (lambda msg: None)
     held = []
     for ev in accepted:
-        for p in droppable(ev):
-            if len(ev.candidate.free) < 2:
-                break
-            alt, s, values = refit_at_null(model, ev, p)
+        for p in secondary(ev):
+            value = default(ev, p)
+            if value is None or not math.isfinite(value) or ev.values.get(p.key) == value:
+                continue
+            alt, s, values = refit_held(model, ev, p, value)
             name = p.key.split(".")[-1]
             if full - s >= THRESHOLD_POINTS:
-                log(f"{ev.candidate.label}: {name} stays ({s - full:+.2f} points without it)")
+                log(f"{ev.candidate.label}: {name} stays ({s - full:+.2f} points held at {value:g})")
                 continue
-            log(f"{ev.candidate.label}: {name} held at {p.null:g} ({s - full:+.2f} points; a parameter must be "
-                f"worth {THRESHOLD_POINTS:g})")
+            log(f"{ev.candidate.label}: {name} held at its default {value:g} ({s - full:+.2f} points; a "
+                f"parameter must be worth {THRESHOLD_POINTS:g})")
             ev.candidate = replace(ev.candidate, free=[fp for fp in ev.candidate.free if fp.key != p.key],
-                                   fixed={**ev.candidate.fixed, name: p.null})
-            ev.held_at_null[name] = p.null
+                                   fixed={**ev.candidate.fixed, name: value})
+            ev.held_at_default[name] = value
             for e in accepted:
                 e.values = {k: values.get(k, v) for k, v in e.values.items() if k != p.key or e is not ev}
-            held.append((ev, p, s))
+            held.append((ev, p, value, s))
             model, full = alt, s
     return model, full, held
 

@@ -124,8 +124,8 @@ class Diagnosis:
 
 
 MAX_ESTIMATION_SAMPLES = 24000   # longer records are fitted on their first 24000 samples (cost per fit)
-HELD_BECAUSE = ("held where it vanishes: free, with the rest refitted, it gains less than the threshold on the "
-                "validation data, so the record does not show it apart from the effect's other parameters")
+HELD_BECAUSE = ("held at the effect's default: free, with the rest refitted, it gains less than the threshold on "
+                "the validation data, so the record does not show it apart from the effect's principal parameter")
 MIN_WINDOW_SAMPLES = 10   # a restart anchors on the smoothed reading (5 samples at 50 Hz): windows are longer
 
 
@@ -375,7 +375,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             params[name] = _absent(fp, v, ev)
             lo_hi = (final.ci95 if final is not None else ev.ci95).get(fp.key, [v, v])
             ci[name] = [float(lo_hi[0]), float(lo_hi[1])]
-        for name, v in ev.held_at_null.items():      # where the record asked for no more than the rest
+        for name, v in ev.held_at_default.items():    # what the record does not show apart from the rest
             params[name] = v
             ci[name] = [v, v]
         item = {"effect": c.effect, "joint": c.joint, "params": params, "ci95": ci, "gain": round(ev.gain, 3),
@@ -384,8 +384,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
                 "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
                 "refit_of_nominal": c.existing, "round": ev.round}
-        if ev.held_at_null:
-            item["held_at_null"] = {name: {"value": v, "because": HELD_BECAUSE} for name, v in ev.held_at_null.items()}
+        if ev.held_at_default:
+            item["held_at_default"] = {name: {"value": v, "because": HELD_BECAUSE} for name, v in ev.held_at_default.items()}
         if elasticity:
             item["elasticity_to_held"] = elasticity
             item["conditional_on"] = sorted({k for row in elasticity.values() for k in conditional.conditional_on(row)})

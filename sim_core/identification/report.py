@@ -315,7 +315,7 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                        f"<td>{_fmt(s['significance'].get(k))}</td></tr>" for k, v in s["params"].items())
         parts.append("<table><tr><th>parameter</th><th>estimate</th><th>95 % interval</th><th>|est - none| / sigma</th></tr>"
                      f"{rows}</table>")
-        for k, h in s.get("held_at_null", {}).items():
+        for k, h in s.get("held_at_default", {}).items():
             parts.append(f"<p><b>Held</b>: {e(k)} = {_fmt(h['value'])}, {e(h['because'])}.</p>")
         for line in conditional.describe(s):
             parts.append(f"<p><b>Conditional</b>: {e(line)}.</p>")
@@ -546,7 +546,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
         for k, v in s["params"].items():
             lo, hi = s["ci95"][k]
             lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
-        lines += [f"- {k} {h['because']}" for k, h in s.get("held_at_null", {}).items()]
+        lines += [f"- {k} {h['because']}" for k, h in s.get("held_at_default", {}).items()]
         lines += [f"- {line}" for line in conditional.describe(s)]
         lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
         if "named_together_with" in s:

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..effects import EFFECTS
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
@@ -430,15 +431,16 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                 st.calib_keys.append(fp.key)
             stopped += f"; {fp.key} calibrated in place of {ev.candidate.label} (= {value:.4g})"
     if accepted:
-        def refit_at_null(model, ev, p):
-            res = _refit_at_null(st, model, accepted, ev, p)
+        def refit_held(model, ev, p, value):
+            res = _refit_held(st, model, accepted, ev, p, value)
             if not res.ok:
                 return model, -math.inf, {}
             return res.spec, base.score(res.spec), res.values
 
-        model, _, held = simpler_parameters(accepted, model, base.score(model), refit_at_null=refit_at_null, log=log)
-        for ev, p, _ in held:
-            stopped += f"; {ev.candidate.label}: {p.key.split('.')[-1]} held at {p.null:g}, not worth a parameter"
+        model, _, held = simpler_parameters(accepted, model, base.score(model), default=effect_default,
+                                            refit_held=refit_held, log=log)
+        for ev, p, value, _ in held:
+            stopped += f"; {ev.candidate.label}: {p.key.split('.')[-1]} held at its default {value:g}, not worth a parameter"
     values: dict[str, float] = {}
     for ev in accepted:
         values.update(ev.values)
@@ -485,15 +487,23 @@ def _refit_rest(st: Setting, base_spec, model, ev: Evaluation, rest: list[Evalua
                   max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
 
 
-def _refit_at_null(st: Setting, model, accepted: list[Evaluation], ev: Evaluation, p: FreeParameter) -> oe.FitResult:
-    """``model`` with ``ev``'s parameter ``p`` at its null and the other parameters of the named
+def effect_default(ev: Evaluation, p: FreeParameter) -> float | None:
+    """The default its effect declares for ``p`` (the typical value), or None."""
+    name = p.key.split(".")[-1]
+    d = next((q.default for q in EFFECTS[ev.candidate.effect].PARAMETERS if q.name == name), None)
+    return float(d) if isinstance(d, (int, float)) else None
+
+
+def _refit_held(st: Setting, model, accepted: list[Evaluation], ev: Evaluation, p: FreeParameter,
+                value: float) -> oe.FitResult:
+    """``model`` with ``ev``'s parameter ``p`` at ``value`` and the other parameters of the named
     effects and the calibration refitted (simpler_parameters)."""
-    at_null = model.copy()
-    p.apply(at_null, p.null)
+    held = model.copy()
+    p.apply(held, value)
     named = [(replace(e.candidate, free=[fp for fp in e.candidate.free if fp.key != p.key]) if e is ev else e.candidate,
               e.effect_params()) for e in accepted]
-    free = free_list(at_null, None, named, st.calib_keys, st.ranges)
-    return oe.fit(st.est_runner, st.est, at_null, free, max_sims=st.budget(len(free)), uncertainty=False, tol=1e-3)
+    free = free_list(held, None, named, st.calib_keys, st.ranges)
+    return oe.fit(st.est_runner, st.est, held, free, max_sims=st.budget(len(free)), uncertainty=False, tol=1e-3)
 
 
 def _extend(model, ev: Evaluation, recalibrate):
