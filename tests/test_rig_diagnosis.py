@@ -51,6 +51,13 @@ def _diagnose(cli, tmp_path, template, hidden, seed=5, rate=50.0, log_every=1, r
     return j, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
 
 
+def _sized_leak(cli, tmp_path, template):
+    """An internal leak coefficient (m^3/(s Pa)) of 4 % of the template's full valve flow at supply pressure."""
+    cli("rig", "new", template, "--out", tmp_path / "sizing", check=True)
+    spec = load_robot(tmp_path / "sizing")
+    return 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+
+
 # a valve passing less one way and a cylinder whose annulus is smaller move the load alike when only
 # the position is logged: on a cylinder the report may name either, marked ambiguous with the other as
 # runner-up and chamber pressures as what would decide (README, "Diagnose your own rig")
@@ -132,9 +139,7 @@ def test_a_leak_the_rigs_calibration_absorbs_is_still_named(cli, tmp_path):
     matter together (elimination.py), carries most of it: within 15 % (-8.2 % at this seed, -12.9 %
     when the supply and the load went back to nominal together). The diagnosis says the coefficient
     is conditional on the supply, with its elasticity (percent per percent of the supply)."""
-    cli("rig", "new", "boom", "--out", tmp_path / "sizing", check=True)
-    spec = load_robot(tmp_path / "sizing")
-    leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+    leak = _sized_leak(cli, tmp_path, "boom")
     j, d = _diagnose(cli, tmp_path, "boom", ("leakage", {"internal": leak}))
     assert d["verdict"] == "discrepancy"
     assert [s["effect"] for s in d["selected"]] == ["leakage"], d["selected"]
@@ -156,9 +161,7 @@ def test_a_leak_fitted_beside_the_rigs_nuisances_is_fitted_to_its_optimum(cli, t
     its elasticity to the true supply it comes within 15 %."""
     from sim_core.identification.conditional import corrected
 
-    cli("rig", "new", "boom", "--out", tmp_path / "sizing", check=True)
-    spec = load_robot(tmp_path / "sizing")
-    leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+    leak = _sized_leak(cli, tmp_path, "boom")
     j, d = _diagnose(cli, tmp_path, "boom", ("leakage", {"internal": leak}), seed=3)
     assert d["verdict"] == "discrepancy", (d["verdict"], d.get("unexplained"))
     assert [s["effect"] for s in d["selected"]] == ["leakage"], d["selected"]
@@ -175,9 +178,7 @@ def test_a_leak_that_pushes_the_calibration_to_its_ranges_ends_is_named(cli, tmp
     record asks for more than the range allows, some misfit absorbed as far as it may be): those go
     back to nominal, and the leak is named instead of the valve null offset that the skewed baseline
     made look best (which it did before this rule). The coefficient within 15 %."""
-    cli("rig", "new", "rotary", "--out", tmp_path / "sizing", check=True)
-    spec = load_robot(tmp_path / "sizing")
-    leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+    leak = _sized_leak(cli, tmp_path, "rotary")
     j, d = _diagnose(cli, tmp_path, "rotary", ("leakage", {"internal": leak}))
     rows = {r["parameter"]: r for r in d["calibration"]["changes"]}
     assert any("end of its range" in (r.get("not_identified_because") or "") for r in rows.values())
@@ -193,9 +194,7 @@ def test_a_leak_the_record_cannot_split_is_given_whole_to_the_cross_port_leak(cl
     held at the effect's default (none to tank) with the rest refitted, the leak to tank costs a
     fraction of a point, so it stays there, the report says so, and the cross-port coefficient
     carries the whole leak, within 15 %."""
-    cli("rig", "new", "rotary", "--out", tmp_path / "sizing", check=True)
-    spec = load_robot(tmp_path / "sizing")
-    leak = 0.04 * actuator_scales(spec, spec.joint_names[0])["q_full"] / spec.supply["pressure"]
+    leak = _sized_leak(cli, tmp_path, "rotary")
     j, d = _diagnose(cli, tmp_path, "rotary", ("leakage", {"internal": leak}), seed=2)
     assert [s["effect"] for s in d["selected"]] == ["leakage"], d["selected"]
     named = d["selected"][0]

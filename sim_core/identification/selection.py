@@ -36,14 +36,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..effects import EFFECTS
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop,
                        simpler_parameters, stand_in)
 from .metrics import savgol_window
-from .parameters import FreeParameter, free_parameter
+from .parameters import FreeParameter, declared, free_parameter
 from .progress import RoundProgress
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner
@@ -437,7 +436,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                 return model, -math.inf, {}
             return res.spec, base.score(res.spec), res.values
 
-        model, _, held = simpler_parameters(accepted, model, base.score(model), default=effect_default,
+        model, _, held = simpler_parameters(accepted, model, base.score(model),
+                                            default=lambda ev, p: effect_default(base_spec, p),
                                             refit_held=refit_held, log=log)
         for ev, p, value, _ in held:
             stopped += f"; {ev.candidate.label}: {p.key.split('.')[-1]} held at its default {value:g}, not worth a parameter"
@@ -487,10 +487,9 @@ def _refit_rest(st: Setting, base_spec, model, ev: Evaluation, rest: list[Evalua
                   max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3)
 
 
-def effect_default(ev: Evaluation, p: FreeParameter) -> float | None:
+def effect_default(spec, p: FreeParameter) -> float | None:
     """The default its effect declares for ``p`` (the typical value), or None."""
-    name = p.key.split(".")[-1]
-    d = next((q.default for q in EFFECTS[ev.candidate.effect].PARAMETERS if q.name == name), None)
+    d = declared(spec, p.key).default
     return float(d) if isinstance(d, (int, float)) else None
 
 
