@@ -124,8 +124,14 @@ def test_sensor_calibration_ranges_stay_inside_the_effects_bounds(tmp_path, cli)
     rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, off={}, seed=1, duration=5.0)
     rec = as_record(spec, rows)
     m = spec.copy()
-    fp = next(f for f in plan(m, rec).free if f.key == f"effects.sensor_offset.{j}.offset")
+    pl = plan(m, rec)
+    fp = next(f for f in pl.free if f.key == f"effects.sensor_offset.{j}.offset")
     assert -0.5 <= fp.lower < 0.0 < fp.upper <= 0.5
+    # the reason a user reads names what the spec estimates (B, in its range) and the range searched
+    # for the offset it causes, not B's range under the offset's name
+    why = pl.why[fp.key]
+    assert f"joints.{j}.sensor.B in [{lo:g}, {hi:g}]" in why, why
+    assert f"range [{fp.lower:g}, {fp.upper:g}]" in why, why
 
 
 def test_a_leak_the_rigs_calibration_absorbs_is_still_named(cli, tmp_path):

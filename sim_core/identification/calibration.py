@@ -129,7 +129,9 @@ def plan(spec, rec: Record, effects: list[str] | None = None, *, keys: list[str]
             held[key] = f"marked estimated but not fitted: {exc}"
             continue
         if fp is not None:
-            add(fp, f"estimated in the spec, range [{lo:g}, {hi:g}]")
+            add(fp, f"estimated in the spec, range [{lo:g}, {hi:g}]" if fp.key == key else
+                f"estimated in the spec: {key} in [{lo:g}, {hi:g}], fitted as the error it causes, "
+                f"range [{fp.lower:g}, {fp.upper:g}]")
     estimated = set(why)
     for k in default_free(spec, rec):
         add(free_parameter(spec, k), "valve flow gain (the baseline)")
