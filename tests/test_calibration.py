@@ -245,7 +245,7 @@ def shifted(tmp_path_factory):
 
 
 def test_an_arm_started_elsewhere_is_not_a_sensor_offset(cli, shifted, tmp_path):
-    proc = cli("diagnose", "--robot", "hydrolek", shifted / "meas.csv", "--report", tmp_path / "rep", "--quiet")
+    proc = cli("diagnose", "--robot", "hydrolek", shifted / "meas.csv", "--report", tmp_path / "rep")
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     assert d["verdict"] == "no_significant_discrepancy", d["selected"]
@@ -253,6 +253,8 @@ def test_an_arm_started_elsewhere_is_not_a_sensor_offset(cli, shifted, tmp_path)
     assert d["data"]["initial_pose_source"]["j2"] == "data"
     rows = d["calibration"]["changes"]
     assert [r["parameter"] for r in rows] == ["joints.j2.valve.rated_flow"] and rows[0]["identified"]
+    # the measured flow gain is the calibration's finding: the command says it, beside the nominal
+    assert f"calibration: joints.j2.valve.rated_flow = {rows[0]['value']:.6g} (nominal {rows[0]['nominal']:.6g})" in proc.stderr
     assert d["calibration"]["values"]["joints.j2.valve.rated_flow"] == pytest.approx(rows[0]["value"])
     assert "coulomb_friction" in d["calibration"]["held"]["joints.j2.cylinder.viscous_friction"]
     assert d["closed_loop"] is False
@@ -288,10 +290,14 @@ def test_a_rigs_wrong_nominal_parameters_are_calibration_findings_not_effects(cl
     truth.set(friction, 2.0 * max(spec.get(friction), 500.0))
     truth.set(f"joints.{j}.initial_position", spec.get(f"joints.{j}.initial_position") + 0.05)
     write_csv(tmp_path / "rec.csv", closed_loop_columns(truth, j, kp=40.0, duration=60.0, seed=4))
-    proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
+    proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--report", tmp_path / "rep")
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     assert d["verdict"] == "no_significant_discrepancy", d["selected"]
+    # what the calibration changed is a finding: the command says each one, measured or not
+    for row in d["calibration"]["changes"]:
+        said = f"calibration: {row['parameter']} = " if row["identified"] else f"calibration: {row['parameter']} not identified"
+        assert said in proc.stderr, (said, proc.stderr)
     assert d["closed_loop"] is True
     rows = {r["parameter"]: r for r in d["calibration"]["changes"]}
     assert set(spec.estimated) - {f"joints.{j}.sensor.A", f"joints.{j}.sensor.B"} <= set(rows)

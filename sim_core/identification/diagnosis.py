@@ -229,8 +229,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     for c in cal.changes:
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
-        elif c.get("conditional_on"):
-            log(f"calibration: {c['parameter']} = {c['value']:.6g} {conditional.given(c)}")
+        else:
+            log(f"calibration: {c['parameter']} = {c['value']:.6g} (nominal {c['nominal']:.6g}) {conditional.given(c)}".rstrip())
     # the candidates refit the identified model parameters with themselves. An effect parameter the
     # calibration switched on stays at its calibrated value (the candidate of that effect refits it),
     # except the spec's estimated ones: those are nuisances of the rig, refitted with every candidate
