@@ -310,3 +310,33 @@ def test_a_recalibration_sends_what_it_cannot_identify_back_to_the_spec_not_to_t
     assert [s["effect"] for s in d["selected"]] == ["valve_offset"], (d["verdict"], d["selected"])
     assert d["selected"][0]["params"]["offset"] == pytest.approx(0.25, rel=0.15)
     assert d["extended"]["fit"][j] >= d["decision"]["channel_ceilings"][j]["angle"] - 1.0
+
+
+def test_the_extended_model_carries_the_calibration_refitted_with_the_named_effect(cli, tmp_path):
+    """A deadband on the cylinder rig, its valve and supply off the spec, no pressures: the baseline,
+    misled by the deadband, identifies little; once the deadband is named the recalibration
+    identifies more (the load, the seal friction), and the final refit fits them beside it. The
+    extended model is that model: extended.toml must carry those values (``simulate --params`` runs
+    what was diagnosed), diagnosis.json and the output say them with what they hang on, and each,
+    corrected with its elasticity to the true supply, comes to the truth."""
+    from sim_core.identification.parameters import free_parameter
+    from sim_core.params_file import apply_params_file
+
+    j, d = _diagnose(cli, tmp_path, "cylinder", ("deadband", {"width": 0.8}))
+    assert [s["effect"] for s in d["selected"]] == ["deadband"]
+    refitted = d["calibration"]["refitted_with_effects"]
+    newly = [k for r in d["calibration"]["recalibrations"] for k in r["newly_identified"]]
+    assert newly and set(newly) <= set(refitted), (newly, refitted)           # the premise
+    spec = load_robot(tmp_path / "rig")
+    extended = apply_params_file(spec.copy(), tmp_path / "rep" / "extended.toml")
+    for k, r in refitted.items():
+        assert free_parameter(extended, k).get(extended) == pytest.approx(r["value"], rel=1e-5), k
+    printed = (tmp_path / "stdout.txt").read_text()
+    load = f"effects.payload.{j}.mass"
+    assert f"calibrated with it: {load} = " in printed and "given supply.pressure" in printed
+    truth = {load: free_parameter(spec, load).get(spec),
+             f"joints.{j}.valve.rated_flow": spec.get(f"joints.{j}.valve.rated_flow") * OFF["valve.rated_flow"]}
+    for k, true in truth.items():
+        r = refitted[k]
+        corrected = r["value"] * OFF["supply.pressure"] ** r["elasticity_to_held"]["supply.pressure"]
+        assert corrected == pytest.approx(true, rel=0.05), (k, r, true)

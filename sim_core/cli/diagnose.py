@@ -87,6 +87,11 @@ def run(args):
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
         for line in conditional.describe(s):
             print(f"    {line}")
+    for k, r in d.calibration.get("refitted_with_effects", {}).items():
+        v, n = r["value"], r["nominal"]
+        if n is not None and v is not None and v != n:
+            print(f"  calibrated with {'them' if len(d.selected) > 1 else 'it'}: {k} = {v:.6g} (nominal {n:.6g}) "
+                  f"{conditional.given(r)}".rstrip())
     for why in (d.unexplained or {}).get("because", []):
         print(f"  unexplained: {why}")
     for cause in (d.unexplained or {}).get("record_causes", []):

@@ -33,7 +33,7 @@ from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_w
 from .candidates import bank
 from .decision import FAR_POINTS, SIGNIFICANCE, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
 from .metrics import noise_std, nrmse_fit, velocity
-from .parameters import FreeParameter
+from .parameters import FreeParameter, free_parameter
 from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
@@ -469,6 +469,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         selected, sel.accepted = [], []
         ext_acc, ext_out, ext_fits = base_acc, base_out, base_fits
         tests["extended"] = tests["baseline"]
+    # the calibrated parameters as the extended model has them: refitted beside the named effects, and
+    # a recalibration may have identified more of them than the baseline did (extended.toml carries these)
+    calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging) if selected else {}
     calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
                                                 {(s["effect"], s["joint"]) for s in selected})
     notes.extend(calib["blind_spots"])
@@ -542,6 +545,23 @@ def _absent(fp: FreeParameter, v: float, ev: Evaluation) -> float:
         if (side == "lower" and null <= fp.lower) or (side == "upper" and null >= fp.upper):
             return float(null)
     return float(v)
+
+
+def _refitted(model, keys: list[str], changes: list[dict], hanging: dict) -> dict:
+    """{key: {value, nominal[, elasticity_to_held, conditional_on]}} of the calibrated parameters the
+    final refit fitted beside the named effects, as ``model`` (the extended model) has them."""
+    nominal = {c["parameter"]: c["nominal"] for c in changes}
+    out = {}
+    for k in keys:
+        row = {"value": _num(free_parameter(model, k).get(model)), "nominal": _num(nominal.get(k, math.nan))}
+        e = hanging.get(k)
+        if e:
+            row["elasticity_to_held"] = {h: round(v, 3) for h, v in e.items()}
+            depends = conditional.conditional_on(e)
+            if depends:
+                row["conditional_on"] = sorted(depends)
+        out[k] = row
+    return out
 
 
 def _num(v: float):

@@ -442,14 +442,24 @@ def _unexplained_html(data: dict) -> str:
     return "".join(parts)
 
 
+def _refitted_cell(r: dict | None) -> str:
+    """A calibrated parameter as the extended model has it, with what it hangs on."""
+    if r is None:
+        return "-"
+    return _fmt(r["value"]) + (f" ({html.escape(conditional.given(r))})" if r.get("conditional_on") else "")
+
+
 def _calibration_html(data: dict) -> str:
     """What the baseline calibration changed (and could not identify), and the closed-loop finding."""
     e = html.escape
     cal = data["calibration"]
     parts = ["<h2>Baseline calibration</h2><p>Freed before any effect was tried; a parameter the record does not "
-             "identify (|value/sigma| &lt; 3, or tied to another by their correlation) is kept at its nominal value.</p>",
+             "identify (|value/sigma| &lt; 3, or tied to another by their correlation) is kept at its nominal value. "
+             "Once effects are named, what the calibration identifies with them in the model is refitted beside them: "
+             "the extended model (and extended.toml) has those values.</p>",
              "<table><tr><th>parameter</th><th>nominal</th><th>fitted</th><th>sigma</th><th>identified</th><th>used</th>"
-             "<th>why freed</th></tr>"]
+             "<th>refitted with the named effects</th><th>why freed</th></tr>"]
+    refitted = cal.get("refitted_with_effects", {})
     for c in cal.get("changes", []):
         ident = (("yes" + (f" ({c['note']})" if c.get("note") else "")) if c["identified"]
                  else f"no: {c.get('not_identified_because', '')}")
@@ -457,7 +467,8 @@ def _calibration_html(data: dict) -> str:
                      f"<td>{_fmt(c['sigma'])}</td><td class='{'ok' if c['identified'] else 'bad'}'>{e(ident)}</td>"
                      f"<td>{_fmt(c['value'])} {e(c.get('unit', ''))}"
                      + (f" ({e(conditional.given(c))})" if c.get("conditional_on") else "")
-                     + f"</td><td>{e(c.get('why', ''))}</td></tr>")
+                     + f"</td><td>{_refitted_cell(refitted.get(c['parameter']))}</td>"
+                     + f"<td>{e(c.get('why', ''))}</td></tr>")
     parts.append("</table>")
     if cal.get("held"):
         parts.append("<details><summary>nominal parameters not freed</summary><ul>"
@@ -477,8 +488,9 @@ def _calibration_html(data: dict) -> str:
 def extended_params(d: Diagnosis, configured_spec) -> dict:
     """The extended model as a parameter/effect file relative to the robot's built-in spec."""
     spec = configured_spec.copy()
-    for k, v in d.calibration["values"].items():
-        if k not in d.calibration.get("identified", d.calibration["values"]):
+    refitted = d.calibration.get("refitted_with_effects", {})
+    for k in d.calibration["values"]:
+        if k not in d.calibration.get("identified", d.calibration["values"]) and k not in refitted:
             continue
         if k.startswith("effects."):
             name, joint = k.split(".")[1], (k.split(".")[2] if k.count(".") == 3 else None)
@@ -558,10 +570,12 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
         lines.append("")
     if data.get("closed_loop"):
         lines += [f"Closed-loop record: {data['closed_loop_evidence'].get('note', '')}.", ""]
-    lines += ["| calibrated | nominal | fitted | sigma | identified |", "|---|---|---|---|---|"]
+    refitted = data["calibration"].get("refitted_with_effects", {})
+    lines += ["| calibrated | nominal | fitted | sigma | identified | with the named effects |", "|---|---|---|---|---|---|"]
     for c in data["calibration"].get("changes", []):
         lines.append(f"| {c['parameter']} | {_fmt(c['nominal'])} | {_fmt(c['fitted'])} | {_fmt(c['sigma'])} | "
-                     f"{('yes' + (f', {conditional.given(c)}' if c.get('conditional_on') else '')) if c['identified'] else 'no (kept nominal)'} |")
+                     f"{('yes' + (f', {conditional.given(c)}' if c.get('conditional_on') else '')) if c['identified'] else 'no (kept nominal)'} | "
+                     f"{_fmt(refitted[c['parameter']]['value']) if c['parameter'] in refitted else '-'} |")
     lines.append("")
     lines.append("| joint | baseline fit | extended fit |")
     lines.append("|---|---|---|")
