@@ -434,10 +434,7 @@ def mark_elasticities(changes: list[dict], rows: dict[str, dict[str, float]]) ->
     for c in changes:
         e = rows.get(c["parameter"])
         if c["identified"] and e:
-            c["elasticity_to_held"] = {k: round(v, 3) for k, v in e.items()}
-            depends = conditional.conditional_on(e)
-            if depends:
-                c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(depends))
+            conditional.mark(c, e)
     return changes
 
 

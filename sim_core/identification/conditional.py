@@ -73,6 +73,16 @@ def conditional_on(rows: dict[str, float]) -> list[str]:
     return sorted(k for k, e in rows.items() if abs(e) >= ELASTICITY_LIMIT)
 
 
+def mark(row: dict, elasticity: dict[str, float]) -> dict:
+    """``row`` (a measured value's row) with its ``elasticity_to_held`` and, for each held parameter
+    it depends on, ``conditional_on`` extended."""
+    row["elasticity_to_held"] = {k: round(e, 3) for k, e in elasticity.items()}
+    depends = conditional_on(elasticity)
+    if depends:
+        row["conditional_on"] = sorted(set(row.get("conditional_on", [])) | set(depends))
+    return row
+
+
 def describe(named: dict) -> list[str]:
     """One line per value of a named effect (a ``selected`` item of the diagnosis) that hangs on a
     held parameter: which, how much, and the correction once its true value is known."""

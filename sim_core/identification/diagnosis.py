@@ -554,12 +554,8 @@ def _refitted(model, keys: list[str], changes: list[dict], hanging: dict) -> dic
     out = {}
     for k in keys:
         row = {"value": _num(free_parameter(model, k).get(model)), "nominal": _num(nominal.get(k, math.nan))}
-        e = hanging.get(k)
-        if e:
-            row["elasticity_to_held"] = {h: round(v, 3) for h, v in e.items()}
-            depends = conditional.conditional_on(e)
-            if depends:
-                row["conditional_on"] = sorted(depends)
+        if hanging.get(k):
+            conditional.mark(row, hanging[k])
         out[k] = row
     return out
 
