@@ -83,8 +83,9 @@ HIDDEN = {
 @pytest.mark.parametrize("case", list(HIDDEN))
 def test_diagnose_says_what_the_textbook_rig_has_that_the_template_has_not(cli, tmp_path, case):
     """The four commands of the README on the textbook rig's log: a clean rig is no discrepancy; a
-    hidden cause is named as its effect with the parameter within 10 % (15 % for a leak) of the truth
-    (achieved within 2 %, leak 6 %), and nothing else is named."""
+    hidden cause is named as its effect with the parameter within 10 % (15 % for a leak, whose size
+    hangs on the supply the calibration holds) of the truth, and nothing else is named
+    (benchmarks/bench_textbook_rig.py over 6 draws each: within 3 %, a leak within 14.4 %)."""
     physical, orientation, seed, expect = HIDDEN[case]
     rig = _rig_dir(cli, tmp_path / "rig", orientation)
     rows = closed_loop_log(Rig(gravity_along=ORIENTATION[orientation][1], **OFF, **physical), seed=seed, q0=0.23)

@@ -1,0 +1,183 @@
+"""How ``hydrohil diagnose`` does on records HydroHIL's simulator did not make: the textbook cylinder.
+
+``tests/textbook_cylinder.py`` is a cylinder on a slide written from Merritt's equations with SciPy,
+apart from sim_core. Each case: ``rig new cylinder`` (hanging load or vertical lift) -> the textbook
+rig, its nominal parameters drawn off the template's (valve flow x0.8-1.3, supply x0.85-1.1, load
+70-150 kg, seal viscous friction 1000-5000 N s/m, start 0.15-0.3 m against the spec's 0.2 m) and
+one physical cause of a magnitude drawn across its range, logged in closed loop (P control, 50 Hz,
+jittered, 12-bit sensor volts, no pressures) -> ``hydrohil import`` -> ``hydrohil diagnose``.
+
+Causes and the effect that must be named (right: named alone, parameter within 15 % of the truth):
+  overlap         spool overlap 3-15 % of the stroke      -> deadband, width = overlap / (V -> stroke)
+  edges           retract edges 0.6-0.85 or 1.2-1.5 x     -> valve_asymmetry, ratio
+  piston_leak     1.5e-12 - 8e-12 m^3/(s Pa)             -> leakage, internal
+  bus_delay       20-100 ms                               -> delay
+  slow_spool      the spool at 5-10 Hz, not the spec's 15 -> spool_lag; its truth is the extra
+                  low-frequency lag of the slower second-order spool, 2 zeta (1/w - 1/w_spec)
+  seal_friction   Coulomb 500-2500 N, supply and load unknown: right = nothing else named
+  seal_measured   the same with the supply and the load measured (held)   -> coulomb_friction
+  clean           nothing                                 -> no_significant_discrepancy
+
+    .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
+        [--causes clean,overlap,...] [--orientations hanging,vertical] [--jobs 2] [--json FILE]
+
+About 15 s per case on this 2-core VM (16 cases per seed with the defaults, two at a time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))     # the textbook rig and the helper the tests use
+
+from rig_records import measured  # noqa: E402
+from textbook_cylinder import Rig, closed_loop_log  # noqa: E402
+
+TOLERANCE = 0.15
+ORIENTATION = {"hanging": ("incline_deg=-90", 1.0), "vertical": ("orientation=vertical", -1.0)}
+V_TO_STROKE = 0.08 * 1.25                    # template: amplifier A/V x spool 1/A
+CAUSES = ("clean", "overlap", "edges", "piston_leak", "bus_delay", "slow_spool", "seal_friction", "seal_measured")
+
+
+def draw(cause: str, rng, seed: int):
+    """(textbook parameters, (effect, parameter, truth) or None) of one cause."""
+    if cause == "overlap":
+        o = rng.uniform(0.03, 0.15)
+        return {"overlap": o}, ("deadband", "width", o / V_TO_STROKE)
+    if cause == "edges":
+        r = rng.uniform(0.6, 0.85) if seed % 2 else rng.uniform(1.2, 1.5)
+        return {"negative_flow_ratio": r}, ("valve_asymmetry", "ratio", r)
+    if cause == "piston_leak":
+        c = math.exp(rng.uniform(math.log(1.5e-12), math.log(8e-12)))
+        return {"piston_leakage": c}, ("leakage", "internal", c)
+    if cause == "bus_delay":
+        d = rng.uniform(0.02, 0.1)
+        return {"command_delay": d}, ("delay", "delay", d)
+    if cause == "slow_spool":
+        hz, spec = rng.uniform(5.0, 10.0), Rig()
+        lag = 2 * spec.spool_zeta * (1 / (2 * math.pi * hz) - 1 / (2 * math.pi * spec.spool_hz))
+        return {"spool_hz": hz}, ("spool_lag", "time_constant", lag)
+    if cause in ("seal_friction", "seal_measured"):
+        f = rng.uniform(500.0, 2500.0)
+        return {"coulomb": f}, (("coulomb_friction", "torque", f) if cause == "seal_measured" else None)
+    return {}, None
+
+
+def run_case(work: Path, cause: str, orientation: str, seed: int) -> dict:
+    rng = np.random.default_rng([seed, CAUSES.index(cause), list(ORIENTATION).index(orientation)])
+    off = dict(rated_flow=2e-4 * rng.uniform(0.8, 1.3), supply=1.4e7 * rng.uniform(0.85, 1.1),
+               load_mass=rng.uniform(70.0, 150.0), viscous=rng.uniform(1000.0, 5000.0))
+    physical, expect = draw(cause, rng, seed)
+    work.mkdir(parents=True)
+    rig = work / "rig"
+
+    def cli(*args):
+        proc = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True,
+                              cwd=ROOT)
+        if proc.returncode:
+            raise RuntimeError(f"hydrohil {args[0]}: {proc.stderr.strip()[-300:]}")
+
+    cli("rig", "new", "cylinder", "--out", rig, "--set", ORIENTATION[orientation][0])
+    if cause == "seal_measured":
+        measured(rig, {"supply.pressure": off["supply"], "effects.payload.lift.mass": off["load_mass"]})
+    rows = closed_loop_log(Rig(gravity_along=ORIENTATION[orientation][1], **off, **physical), seed=seed,
+                           q0=rng.uniform(0.15, 0.3))
+    np.savetxt(work / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
+    t0 = time.perf_counter()
+    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", "q_lift=1:sensor_volts", "--column", "u_lift=2")
+    cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
+    seconds = time.perf_counter() - t0
+    d = json.loads((work / "rep" / "diagnosis.json").read_text())
+    named = [s["effect"] for s in d["selected"]]
+    error = None
+    if expect:
+        effect, key, truth = expect
+        hit = [s for s in d["selected"] if s["effect"] == effect]
+        error = hit[0]["params"][key] / truth - 1.0 if hit else None
+        right = named == [effect] and error is not None and abs(error) <= TOLERANCE
+    elif cause == "seal_friction":        # no pressures, supply and load estimated: not testable, so name nothing
+        right = named in ([], ["coulomb_friction"])
+    else:
+        right = d["verdict"] == "no_significant_discrepancy"
+    return {"cause": cause, "orientation": orientation, "seed": seed, "physical": physical,
+            "truth": None if not expect else {expect[0]: {expect[1]: expect[2]}}, "verdict": d["verdict"],
+            "named": [(s["effect"], s["params"]) for s in d["selected"]], "error": error, "right": right,
+            "ambiguous_with": [s["runner_up"]["effect"] for s in d["selected"] if s.get("ambiguous")],
+            "fit_before": d["baseline"]["fit"]["lift"], "fit_after": (d.get("extended") or {}).get("fit", {}).get("lift"),
+            "seconds": seconds}
+
+
+def _case(args):
+    work, cause, orientation, seed = args
+    try:
+        return run_case(work, cause, orientation, seed)
+    except Exception as exc:  # a case that fails is a finding, not the end of the run
+        return {"cause": cause, "orientation": orientation, "seed": seed, "right": False, "failed": str(exc)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--causes", default=",".join(CAUSES))
+    ap.add_argument("--orientations", default="hanging,vertical")
+    ap.add_argument("--jobs", type=int, default=2, help="cases run at once")
+    ap.add_argument("--json", metavar="FILE")
+    args = ap.parse_args()
+    causes = args.causes.split(",")
+    bad = set(causes) - set(CAUSES) | set(args.orientations.split(",")) - set(ORIENTATION)
+    if bad:
+        ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; orientations: hanging, vertical")
+    tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
+    jobs = [(tmp / f"{c}_{o}_{s}", c, o, s) for s in range(args.first_seed, args.first_seed + args.seeds)
+            for o in args.orientations.split(",") for c in causes]
+    t0 = time.perf_counter()
+    cases = []
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for c in pool.map(_case, jobs):
+            cases.append(c)
+            head = f"{c['cause']:14s} {c['orientation']:8s} seed {c['seed']}:"
+            if "failed" in c:
+                print(f"{head} FAILED {c['failed']}", flush=True)
+                continue
+            truth = "; ".join(f"{e} {k}={v:.4g}" for e, p in (c["truth"] or {}).items() for k, v in p.items()) or "-"
+            named = "; ".join(f"{e} {', '.join(f'{k}={v:.4g}' for k, v in p.items())}" for e, p in c["named"]) or "-"
+            err = "" if c["error"] is None else f" ({100 * c['error']:+.1f} %)"
+            err += "".join(f" (ambiguous with {e})" for e in c["ambiguous_with"])
+            after = "" if c["fit_after"] is None else f" -> {c['fit_after']:.1f}"
+            print(f"{head} {'RIGHT' if c['right'] else 'wrong'}  truth {truth}; {c['verdict']}: {named}{err}; "
+                  f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
+    wall = time.perf_counter() - t0
+    print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "
+          "without the supply and the load measured: nothing else named)")
+    for cause in causes:
+        sel = [c for c in cases if c["cause"] == cause]
+        errs = [abs(c["error"]) for c in sel if c.get("error") is not None]
+        print(f"  {cause:14s} {sum(c['right'] for c in sel)}/{len(sel)} right"
+              + (f", parameter error median {100 * float(np.median(errs)):.1f} %, worst {100 * max(errs):.1f} %" if errs else ""))
+    total = sum(c["right"] for c in cases)
+    done = sorted(c["seconds"] for c in cases if "seconds" in c)
+    print(f"  all: {total}/{len(cases)} right ({100 * total / len(cases):.0f} %)")
+    if done:
+        print(f"  diagnose (import included): median {done[len(done) // 2]:.1f} s, max {done[-1]:.1f} s "
+              f"({args.jobs} at a time); bench wall {wall:.0f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps(cases, indent=1))
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
