@@ -19,7 +19,8 @@ Causes and the effect that must be named (right: named alone, parameter within 1
   clean           nothing                                 -> no_significant_discrepancy
 
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
-        [--causes clean,overlap,...] [--orientations hanging,vertical] [--jobs 2] [--json FILE]
+        [--causes clean,overlap,...] [--orientations hanging,vertical] [--jobs 2] [--control-every 1]
+        [--json FILE]
 
 About 15 s per case on this 2-core VM (16 cases per seed with the defaults, two at a time).
 """
@@ -75,7 +76,7 @@ def draw(cause: str, rng, seed: int):
     return {}, None
 
 
-def run_case(work: Path, cause: str, orientation: str, seed: int) -> dict:
+def run_case(work: Path, cause: str, orientation: str, seed: int, control_every: int = 1) -> dict:
     rng = np.random.default_rng([seed, CAUSES.index(cause), list(ORIENTATION).index(orientation)])
     off = dict(rated_flow=2e-4 * rng.uniform(0.8, 1.3), supply=1.4e7 * rng.uniform(0.85, 1.1),
                load_mass=rng.uniform(70.0, 150.0), viscous=rng.uniform(1000.0, 5000.0))
@@ -93,7 +94,7 @@ def run_case(work: Path, cause: str, orientation: str, seed: int) -> dict:
     if cause == "seal_measured":
         measured(rig, {"supply.pressure": off["supply"], "effects.payload.lift.mass": off["load_mass"]})
     rows = closed_loop_log(Rig(gravity_along=ORIENTATION[orientation][1], **off, **physical), seed=seed,
-                           q0=rng.uniform(0.15, 0.3))
+                           q0=rng.uniform(0.15, 0.3), control_every=control_every)
     np.savetxt(work / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
     t0 = time.perf_counter()
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
@@ -121,9 +122,9 @@ def run_case(work: Path, cause: str, orientation: str, seed: int) -> dict:
 
 
 def _case(args):
-    work, cause, orientation, seed = args
+    work, cause, orientation, seed, control_every = args
     try:
-        return run_case(work, cause, orientation, seed)
+        return run_case(work, cause, orientation, seed, control_every)
     except Exception as exc:  # a case that fails is a finding, not the end of the run
         return {"cause": cause, "orientation": orientation, "seed": seed, "right": False, "failed": str(exc)}
 
@@ -135,6 +136,8 @@ def main():
     ap.add_argument("--causes", default=",".join(CAUSES))
     ap.add_argument("--orientations", default="hanging,vertical")
     ap.add_argument("--jobs", type=int, default=2, help="cases run at once")
+    ap.add_argument("--control-every", type=int, default=1, metavar="M",
+                    help="the rig's controller runs at M x the log's 50 Hz and every M-th sample is logged")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
@@ -142,7 +145,7 @@ def main():
     if bad:
         ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; orientations: hanging, vertical")
     tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
-    jobs = [(tmp / f"{c}_{o}_{s}", c, o, s) for s in range(args.first_seed, args.first_seed + args.seeds)
+    jobs = [(tmp / f"{c}_{o}_{s}", c, o, s, args.control_every) for s in range(args.first_seed, args.first_seed + args.seeds)
             for o in args.orientations.split(",") for c in causes]
     t0 = time.perf_counter()
     cases = []
@@ -161,6 +164,8 @@ def main():
             print(f"{head} {'RIGHT' if c['right'] else 'wrong'}  truth {truth}; {c['verdict']}: {named}{err}; "
                   f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     wall = time.perf_counter() - t0
+    if args.control_every > 1:
+        print(f"\nthe rig's controller at {50 * args.control_every} Hz, every {args.control_every}th sample logged", end="")
     print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "
           "without the supply and the load measured: nothing else named)")
     for cause in causes:

@@ -100,9 +100,10 @@ def rhs(rig: Rig, u: float):
 
 
 def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float = 50.0, q0: float = 0.23,
-                    kp: float = 100.0, jitter: float = 0.1, references=(0.12, 0.38)) -> np.ndarray:
+                    kp: float = 100.0, jitter: float = 0.1, references=(0.12, 0.38), control_every: int = 1) -> np.ndarray:
     """A P controller (kp in V/m, command clipped to +-10 V) tracking set-point steps held 1.5-4 s within
-    ``references`` (m); returns the logged rows (time s, sensor V, command V)."""
+    ``references`` (m), run at ``control_every`` x ``rate``; returns the logged rows (time s, sensor V,
+    command V), every ``control_every``-th of the controller's (a logger slower than the loop)."""
     rng = np.random.default_rng(seed)
     steps_t, steps_r, t = [], [], 0.0
     while t < duration:
@@ -123,11 +124,12 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
         ref = steps_r[int(np.searchsorted(steps_t, t, side="right")) - 1]
         u = float(np.clip(kp * (ref - (rig.sensor_a * volts + rig.sensor_b)), -10.0, 10.0))
         rows.append((t, volts, round(u, 3)))
-        dt = (1.0 + rng.uniform(-jitter, jitter)) / rate
+        dt = (1.0 + rng.uniform(-jitter, jitter)) / (rate * control_every)
         # the valve sees each command from its time + command_delay on: split the interval where one
         # delayed command gives way to the next
-        seen_t = np.array([r[0] for r in rows[-64:]]) + rig.command_delay
-        seen_u = [r[2] for r in rows[-64:]]
+        recent = rows[-64 * control_every:]
+        seen_t = np.array([r[0] for r in recent]) + rig.command_delay
+        seen_u = [r[2] for r in recent]
         cuts = [t] + [c for c in seen_t if t < c < t + dt] + [t + dt]
         for a, b in zip(cuts[:-1], cuts[1:]):
             n = int(np.searchsorted(seen_t, a, side="right")) - 1
@@ -138,4 +140,4 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
                 raise RuntimeError(f"textbook cylinder: {sol.message} at t = {a:.3f} s")
             y = sol.y[:, -1]
         t += dt
-    return np.array(rows)
+    return np.array(rows)[::control_every]
