@@ -116,7 +116,7 @@ def run_case(work: Path, cause: str, orientation: str, seed: int, control_every:
     return {"cause": cause, "orientation": orientation, "seed": seed, "physical": physical,
             "truth": None if not expect else {expect[0]: {expect[1]: expect[2]}}, "verdict": d["verdict"],
             "named": [(s["effect"], s["params"]) for s in d["selected"]], "error": error, "right": right,
-            "ambiguous_with": [s["runner_up"]["effect"] for s in d["selected"] if s.get("ambiguous")],
+            "ambiguous_with": [r["effect"] for s in d["selected"] for r in s.get("rivals", [])],
             "fit_before": d["baseline"]["fit"]["lift"], "fit_after": (d.get("extended") or {}).get("fit", {}).get("lift"),
             "seconds": seconds}
 
@@ -159,7 +159,7 @@ def main():
             truth = "; ".join(f"{e} {k}={v:.4g}" for e, p in (c["truth"] or {}).items() for k, v in p.items()) or "-"
             named = "; ".join(f"{e} {', '.join(f'{k}={v:.4g}' for k, v in p.items())}" for e, p in c["named"]) or "-"
             err = "" if c["error"] is None else f" ({100 * c['error']:+.1f} %)"
-            err += "".join(f" (ambiguous with {e})" for e in c["ambiguous_with"])
+            err += f" (ambiguous with {', '.join(c['ambiguous_with'])})" if c["ambiguous_with"] else ""
             after = "" if c["fit_after"] is None else f" -> {c['fit_after']:.1f}"
             print(f"{head} {'RIGHT' if c['right'] else 'wrong'}  truth {truth}; {c['verdict']}: {named}{err}; "
                   f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
@@ -171,7 +171,10 @@ def main():
     for cause in causes:
         sel = [c for c in cases if c["cause"] == cause]
         errs = [abs(c["error"]) for c in sel if c.get("error") is not None]
+        listed = sum(not c["right"] and bool(c.get("truth")) and next(iter(c["truth"])) in c.get("ambiguous_with", [])
+                     for c in sel)
         print(f"  {cause:14s} {sum(c['right'] for c in sel)}/{len(sel)} right"
+              + (f" ({listed} more named wrong, the truth listed as close)" if listed else "")
               + (f", parameter error median {100 * float(np.median(errs)):.1f} %, worst {100 * max(errs):.1f} %" if errs else ""))
     total = sum(c["right"] for c in cases)
     done = sorted(c["seconds"] for c in cases if "seconds" in c)

@@ -596,6 +596,20 @@ def test_runner_up_within_twenty_percent_is_ambiguous_with_what_would_decide():
     assert dc.rivalry(win, [win], False) == {}
 
 
+def test_every_candidate_within_the_margin_is_listed_as_a_rival():
+    """Four effects within 0.02 points (a position-only record: each sets the speeds per volt) are all
+    listed, the runner-up first, each with what would decide it; one outside the margin is not."""
+    win = scored(cand("valve_asymmetry"), gain=8.345)
+    round_ = [win, scored(cand("coulomb_friction"), gain=8.333), scored(cand("payload"), gain=8.344),
+              scored(cand("area_ratio"), gain=8.334), scored(cand("valve_offset"), gain=6.0)]
+    r = dc.rivalry(win, round_, have_pressures=False)
+    assert r["ambiguous"] is True
+    assert [x["effect"] for x in r["rivals"]] == ["payload", "area_ratio", "coulomb_friction"]
+    assert r["rivals"][0]["effect"] == r["runner_up"]["effect"] and r["rivals"][0]["decided_by"] == r["decided_by"]
+    assert r["rivals"][2]["decided_by"] == decider("valve_asymmetry", "coulomb_friction", False)
+    assert "rivals" not in dc.rivalry(win, [win, scored(cand("payload"), gain=6.0)], False)
+
+
 def test_the_same_effect_elsewhere_decides_by_other_poses():
     p2, p6 = cand("payload", "j2"), cand("payload", "j6")
     win = scored(p2, gain=10.0)

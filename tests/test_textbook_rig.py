@@ -102,3 +102,32 @@ def test_diagnose_says_what_the_textbook_rig_has_that_the_template_has_not(cli, 
     assert d["verdict"] == "discrepancy", d["decision"]
     assert [s["effect"] for s in d["selected"]] == [effect]
     assert d["selected"][0]["params"][param] == pytest.approx(truth, rel=0.15 if effect == "leakage" else 0.10)
+
+
+@pytest.mark.parametrize("orientation,seed", [("hanging", 2), ("vertical", 3)])
+def test_a_measured_rigs_seal_friction_is_named_or_listed_as_close(cli, tmp_path, orientation, seed):
+    """Coulomb friction with the supply and the load measured (written in, [estimated] lines deleted):
+    with the seal's viscous friction still unknown a position-only log sets the same two speeds per
+    volt for a Coulomb friction, a valve asymmetry, an area ratio and a payload. Whichever is named,
+    the friction is named or listed among the rivals within the margin, with what would decide, in
+    diagnosis.json and on the command line."""
+    from rig_records import measured
+
+    rig = _rig_dir(cli, tmp_path / "rig", orientation)
+    measured(rig, {"supply.pressure": OFF["supply"], "effects.payload.lift.mass": OFF["load_mass"]})
+    rows = closed_loop_log(Rig(gravity_along=ORIENTATION[orientation][1], coulomb=1500.0, **OFF), seed=seed, q0=0.23)
+    np.savetxt(tmp_path / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
+    proc = cli("diagnose", "--robot", rig, tmp_path / "log.csv", "--no-header", "--column", "time=0",
+               "--column", "q_lift=1:sensor_volts", "--column", "u_lift=2", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert d["verdict"] == "discrepancy" and len(d["selected"]) == 1, d["decision"]
+    s = d["selected"][0]
+    if s["effect"] == "coulomb_friction":
+        assert s["params"]["torque"] == pytest.approx(1500.0, rel=0.15)
+        return
+    assert s["ambiguous"], s
+    rival = [r for r in s["rivals"] if r["effect"] == "coulomb_friction"]
+    assert rival and rival[0]["decided_by"], s["rivals"]
+    line = next(x for x in proc.stdout.splitlines() if x.strip().startswith(s["effect"]))
+    assert "coulomb_friction" in line and ("as close: " in line or "ambiguous with coulomb_friction" in line)

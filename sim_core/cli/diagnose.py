@@ -82,6 +82,9 @@ def run(args):
     for s in d.selected:
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
         flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""
+        more = [r["effect"] + (f" on {r['joint']}" if r["joint"] and r["joint"] != s["joint"] else "")
+                for r in s.get("rivals", [])[1:]]
+        flag += f"; as close: {', '.join(more)}" if more else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
         for name, h in s.get("held_at_default", {}).items():
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")

@@ -527,7 +527,13 @@ def ambiguous(winner: Evaluation, runner_up: Evaluation) -> bool:
 
 
 def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: bool) -> dict:
-    """The runner-up of the winner's round, whether the choice is ambiguous, and what would decide."""
+    """The runner-up of the winner's round, whether the choice is ambiguous, and what would decide.
+
+    When it is, ``rivals`` lists every candidate of the round within the margin (the runner-up first,
+    then by gain), each with what would decide it from the winner: on a position-only record several
+    effects can set the same speeds per volt (a valve asymmetry, an area ratio, a payload and a
+    Coulomb friction within 0.02 points of each other), and naming only the runner-up hides that the
+    named one is one of four."""
     others = [e for e in round_evals if e is not winner]
     if not others:
         return {}
@@ -537,6 +543,13 @@ def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: b
     if ambiguous(winner, ru):
         out["ambiguous"] = True
         out["decided_by"] = decider(winner.candidate.effect, ru.candidate.effect, have_pressures)
+        close, seen = [], set()
+        for e in sorted(others, key=lambda e: -e.gain):
+            if ambiguous(winner, e) and e.key not in seen:
+                seen.add(e.key)
+                close.append({"effect": e.candidate.effect, "joint": e.candidate.joint, "gain": round(e.gain, 3),
+                              "decided_by": decider(winner.candidate.effect, e.candidate.effect, have_pressures)})
+        out["rivals"] = close
     else:
         out["ambiguous"] = False
     return out

@@ -334,6 +334,9 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                          f"({ru['gain']:+.2f} points{_share(ru)}).")
             if s.get("ambiguous"):
                 parts.append(f" <b class='bad'>Ambiguous</b>: the margin is under 20 %. What would decide: {e(s['decided_by'])}.")
+                for r in s.get("rivals", [])[1:]:
+                    parts.append(f" As close: {e(r['effect'])}{' on ' + e(r['joint']) if r['joint'] else ''} "
+                                 f"({r['gain']:+.2f} points); what would decide: {e(r['decided_by'])}.")
             parts.append("</p>")
     parts.append(_calibration_html(data))
     # fits
@@ -567,6 +570,8 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
                          + f": neither passes alone (alone {s.get('alone', {}).get('gain', float('nan')):+.2f} points)")
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
+            lines += [f"- as close: {r['effect']}" + (f" on {r['joint']}" if r["joint"] else "")
+                      + f" ({r['gain']:+.2f} points); decided by {r['decided_by']}" for r in s.get("rivals", [])[1:]]
         lines.append("")
     if data.get("closed_loop"):
         lines += [f"Closed-loop record: {data['closed_loop_evidence'].get('note', '')}.", ""]
