@@ -1,9 +1,11 @@
-"""How ``hydrohil diagnose`` does on records HydroHIL's simulator did not make: the textbook cylinder.
+"""How ``hydrohil diagnose`` does on records HydroHIL's simulator did not make: the textbook rigs.
 
-``tests/textbook_cylinder.py`` is a cylinder on a slide written from Merritt's equations with SciPy,
-apart from sim_core. Each case: ``rig new cylinder`` (hanging load or vertical lift) -> the textbook
-rig, its nominal parameters drawn off the template's (valve flow x0.8-1.3, supply x0.85-1.1, load
-70-150 kg, seal viscous friction 1000-5000 N s/m, start 0.15-0.3 m against the spec's 0.2 m) and
+``tests/textbook_cylinder.py`` is a cylinder on a slide or raising a boom, written from Merritt's
+equations with SciPy, apart from sim_core. Each case: ``rig new cylinder`` (hanging load or vertical
+lift) or ``rig new boom`` -> the textbook rig, its nominal parameters drawn off the template's (valve
+flow x0.8-1.3, supply x0.85-1.1; the cylinder's load 70-150 kg, seal viscous friction 1000-5000 N s/m,
+start 0.15-0.3 m against the spec's 0.2 m; the boom's tip load 25-80 kg, 2000-12000 N s/m, start
+0.05-0.6 rad against 0.2 rad) and
 one physical cause of a magnitude drawn across its range, logged in closed loop (P control, 50 Hz,
 jittered, 12-bit sensor volts, no pressures) -> ``hydrohil import`` -> ``hydrohil diagnose``.
 
@@ -16,13 +18,15 @@ Causes and the effect that must be named (right: named alone, parameter within 1
                   low-frequency lag of the slower second-order spool, 2 zeta (1/w - 1/w_spec)
   seal_friction   Coulomb 500-2500 N, supply and load unknown: right = nothing else named
   seal_measured   the same with the supply and the load measured (held)   -> coulomb_friction
+                  (both on the slide only: on a boom a rod force is a joint torque that varies with
+                  the arm, which the bank's Coulomb friction is not)
   clean           nothing                                 -> no_significant_discrepancy
 
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
-        [--causes clean,overlap,...] [--orientations hanging,vertical] [--jobs 2] [--control-every 1]
+        [--causes clean,overlap,...] [--rigs hanging,vertical,boom] [--jobs 2] [--control-every 1]
         [--json FILE]
 
-About 15 s per case on this 2-core VM (16 cases per seed with the defaults, two at a time).
+About 10 s per case on this 2-core VM (22 cases per seed with the defaults, two at a time).
 """
 
 from __future__ import annotations
@@ -44,11 +48,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the textbook rig and the helper the tests use
 
 from rig_records import measured  # noqa: E402
-from textbook_cylinder import Rig, closed_loop_log  # noqa: E402
+from textbook_cylinder import BENCHES, SPOOL_GAIN_PER_VOLT, Rig, closed_loop_log  # noqa: E402
 
 TOLERANCE = 0.15
-ORIENTATION = {"hanging": ("incline_deg=-90", 1.0), "vertical": ("orientation=vertical", -1.0)}
-V_TO_STROKE = 0.08 * 1.25                    # template: amplifier A/V x spool 1/A
+# per template: the truth's load (kg), seal viscous friction (N s/m) and start (m or rad) are drawn in
+DRAWS = {"cylinder": {"load": (70.0, 150.0), "viscous": (1000.0, 5000.0), "start": (0.15, 0.3)},
+         "boom": {"load": (25.0, 80.0), "viscous": (2000.0, 12000.0), "start": (0.05, 0.6)}}
+# a rod force: on a boom it is a joint torque that varies with the arm, which the bank's is not
+SLIDE_ONLY = ("seal_friction", "seal_measured")
 CAUSES = ("clean", "overlap", "edges", "piston_leak", "bus_delay", "slow_spool", "seal_friction", "seal_measured")
 
 
@@ -56,7 +63,7 @@ def draw(cause: str, rng, seed: int):
     """(textbook parameters, (effect, parameter, truth) or None) of one cause."""
     if cause == "overlap":
         o = rng.uniform(0.03, 0.15)
-        return {"overlap": o}, ("deadband", "width", o / V_TO_STROKE)
+        return {"overlap": o}, ("deadband", "width", o / SPOOL_GAIN_PER_VOLT)
     if cause == "edges":
         r = rng.uniform(0.6, 0.85) if seed % 2 else rng.uniform(1.2, 1.5)
         return {"negative_flow_ratio": r}, ("valve_asymmetry", "ratio", r)
@@ -76,10 +83,13 @@ def draw(cause: str, rng, seed: int):
     return {}, None
 
 
-def run_case(work: Path, cause: str, orientation: str, seed: int, control_every: int = 1) -> dict:
-    rng = np.random.default_rng([seed, CAUSES.index(cause), list(ORIENTATION).index(orientation)])
-    off = dict(rated_flow=2e-4 * rng.uniform(0.8, 1.3), supply=1.4e7 * rng.uniform(0.85, 1.1),
-               load_mass=rng.uniform(70.0, 150.0), viscous=rng.uniform(1000.0, 5000.0))
+def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1) -> dict:
+    bench = BENCHES[rig_name]
+    draws = DRAWS[bench.template]
+    rng = np.random.default_rng([seed, CAUSES.index(cause), list(BENCHES).index(rig_name)])
+    nominal = Rig(**bench.nominal)
+    off = dict(rated_flow=nominal.rated_flow * rng.uniform(0.8, 1.3), supply=nominal.supply * rng.uniform(0.85, 1.1),
+               load_mass=rng.uniform(*draws["load"]), viscous=rng.uniform(*draws["viscous"]))
     physical, expect = draw(cause, rng, seed)
     work.mkdir(parents=True)
     rig = work / "rig"
@@ -90,15 +100,16 @@ def run_case(work: Path, cause: str, orientation: str, seed: int, control_every:
         if proc.returncode:
             raise RuntimeError(f"hydrohil {args[0]}: {proc.stderr.strip()[-300:]}")
 
-    cli("rig", "new", "cylinder", "--out", rig, "--set", ORIENTATION[orientation][0])
+    j = bench.joint
+    cli("rig", "new", bench.template, "--out", rig, *[a for kv in bench.rig_set for a in ("--set", kv)])
     if cause == "seal_measured":
-        measured(rig, {"supply.pressure": off["supply"], "effects.payload.lift.mass": off["load_mass"]})
-    rows = closed_loop_log(Rig(gravity_along=ORIENTATION[orientation][1], **off, **physical), seed=seed,
-                           q0=rng.uniform(0.15, 0.3), control_every=control_every)
+        measured(rig, {"supply.pressure": off["supply"], f"effects.payload.{j}.mass": off["load_mass"]})
+    rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed,
+                           **{**bench.loop, "q0": rng.uniform(*draws["start"])}, control_every=control_every)
     np.savetxt(work / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
     t0 = time.perf_counter()
     cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
-        "--column", "time=0", "--column", "q_lift=1:sensor_volts", "--column", "u_lift=2")
+        "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2")
     cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
     seconds = time.perf_counter() - t0
     d = json.loads((work / "rep" / "diagnosis.json").read_text())
@@ -113,20 +124,20 @@ def run_case(work: Path, cause: str, orientation: str, seed: int, control_every:
         right = named in ([], ["coulomb_friction"])
     else:
         right = d["verdict"] == "no_significant_discrepancy"
-    return {"cause": cause, "orientation": orientation, "seed": seed, "physical": physical,
+    return {"cause": cause, "rig": rig_name, "seed": seed, "physical": physical,
             "truth": None if not expect else {expect[0]: {expect[1]: expect[2]}}, "verdict": d["verdict"],
             "named": [(s["effect"], s["params"]) for s in d["selected"]], "error": error, "right": right,
             "ambiguous_with": [r["effect"] for s in d["selected"] for r in s.get("rivals", [])],
-            "fit_before": d["baseline"]["fit"]["lift"], "fit_after": (d.get("extended") or {}).get("fit", {}).get("lift"),
+            "fit_before": d["baseline"]["fit"][j], "fit_after": (d.get("extended") or {}).get("fit", {}).get(j),
             "seconds": seconds}
 
 
 def _case(args):
-    work, cause, orientation, seed, control_every = args
+    work, cause, rig_name, seed, control_every = args
     try:
-        return run_case(work, cause, orientation, seed, control_every)
+        return run_case(work, cause, rig_name, seed, control_every)
     except Exception as exc:  # a case that fails is a finding, not the end of the run
-        return {"cause": cause, "orientation": orientation, "seed": seed, "right": False, "failed": str(exc)}
+        return {"cause": cause, "rig": rig_name, "seed": seed, "right": False, "failed": str(exc)}
 
 
 def main():
@@ -134,25 +145,25 @@ def main():
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--causes", default=",".join(CAUSES))
-    ap.add_argument("--orientations", default="hanging,vertical")
+    ap.add_argument("--rigs", default="hanging,vertical,boom", help=f"of {', '.join(BENCHES)}")
     ap.add_argument("--jobs", type=int, default=2, help="cases run at once")
     ap.add_argument("--control-every", type=int, default=1, metavar="M",
                     help="the rig's controller runs at M x the log's 50 Hz and every M-th sample is logged")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
-    bad = set(causes) - set(CAUSES) | set(args.orientations.split(",")) - set(ORIENTATION)
+    bad = set(causes) - set(CAUSES) | set(args.rigs.split(",")) - set(BENCHES)
     if bad:
-        ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; orientations: hanging, vertical")
+        ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; rigs: {', '.join(BENCHES)}")
     tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
-    jobs = [(tmp / f"{c}_{o}_{s}", c, o, s, args.control_every) for s in range(args.first_seed, args.first_seed + args.seeds)
-            for o in args.orientations.split(",") for c in causes]
+    jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, args.control_every) for s in range(args.first_seed, args.first_seed + args.seeds)
+            for r in args.rigs.split(",") for c in causes if not (BENCHES[r].template != "cylinder" and c in SLIDE_ONLY)]
     t0 = time.perf_counter()
     cases = []
     with ProcessPoolExecutor(args.jobs) as pool:
         for c in pool.map(_case, jobs):
             cases.append(c)
-            head = f"{c['cause']:14s} {c['orientation']:8s} seed {c['seed']}:"
+            head = f"{c['cause']:14s} {c['rig']:8s} seed {c['seed']}:"
             if "failed" in c:
                 print(f"{head} FAILED {c['failed']}", flush=True)
                 continue
@@ -170,6 +181,8 @@ def main():
           "without the supply and the load measured: nothing else named)")
     for cause in causes:
         sel = [c for c in cases if c["cause"] == cause]
+        if not sel:
+            continue
         errs = [abs(c["error"]) for c in sel if c.get("error") is not None]
         listed = sum(not c["right"] and bool(c.get("truth")) and next(iter(c["truth"])) in c.get("ambiguous_with", [])
                      for c in sel)

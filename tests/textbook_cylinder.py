@@ -1,8 +1,9 @@
-"""A rig HydroHIL's simulator did not make: a cylinder on a slide, written from the textbook.
+"""A rig HydroHIL's simulator did not make: a cylinder on a slide or raising a boom, from the textbook.
 
 The equations are Merritt's (Hydraulic Control Systems, 1967, ch. 3 and 5) for a single-rod cylinder
-fed by a 4/3 proportional valve, written here from the meaning of the rig template's parameters (their
-comments in robot.toml), with none of sim_core's code: its own state, its own orifice regularisation,
+fed by a 4/3 proportional valve, acting directly on a slide or through its two pins on a boom (the
+law of cosines, by hand), written here from the meaning of the rig templates' parameters (their
+comments in robot.toml and the URDF), with none of sim_core's code: its own state, its own orifice regularisation,
 hose volumes lumped into the chambers, a tanh Coulomb friction, SciPy's LSODA between samples. A
 logger and a P controller run on the jittered sample grid, as on a test bench, and the log is what
 such a bench writes: `time (s), position (sensor volts, quantised), valve command (V)`.
@@ -20,6 +21,30 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 G = 9.80665  # m/s^2
+
+
+@dataclass(frozen=True)
+class Boom:
+    """A boom on a pivot raised by the cylinder through its pins (the `boom` template's geometry).
+    Angles in rad, positive raises the boom; lengths in m from the pivot, [x, z] with x forward (the
+    boom at q = 0) and z up."""
+    mass: float = 60.0                  # kg, without the load
+    com: float = 1.0                    # m along the boom
+    inertia: float = 20.0               # kg m^2 about its centre of mass, across the pivot axis
+    tip: float = 2.0                    # m, where the load hangs
+    base_mount: tuple = (0.15, -1.0)    # m, the cylinder's base pin, fixed
+    rod_mount: tuple = (1.0, 0.0)       # m, the rod's pin, in the boom's frame
+    lower: float = -0.2                 # rad, the boom angle at full retraction
+    upper: float = 0.9                  # rad, at full extension
+
+    def length(self, q: float) -> tuple[float, float]:
+        """(pin-to-pin length L (m), dL/dq (m/rad))."""
+        rx, rz = self.rod_mount
+        c, s = math.cos(q), math.sin(q)
+        px, pz = rx * c - rz * s, rx * s + rz * c          # the rod pin, rotated with the boom
+        dx, dz = px - self.base_mount[0], pz - self.base_mount[1]
+        length = math.hypot(dx, dz)
+        return length, (dx * -pz + dz * px) / length        # dP/dq = (-pz, px)
 
 
 @dataclass(frozen=True)
@@ -59,6 +84,8 @@ class Rig:
     sensor_b: float = 0.0               # m
     sensor_noise: float = 1e-3          # V
     sensor_bits: int = 12               # over 0..10 V
+    boom: Boom | None = None            # the cylinder raises this boom (q in rad; load_mass at its tip,
+                                        # slide_mass, gravity_along and stroke unused), else a slide
 
     def with_(self, **kw) -> "Rig":
         return replace(self, **kw)
@@ -73,36 +100,58 @@ def _edge(k: float, opening: float, dp: float, dp_lam: float) -> float:
     return k * opening * dp / math.sqrt(dp_lam)
 
 
+def mechanics(rig: Rig):
+    """(piston(q) -> (x (m), dx/dq), inertia (kg or kg m^2), gravity(q) -> generalised force along +q)."""
+    b = rig.boom
+    if b is None:
+        m = rig.slide_mass + rig.load_mass
+        return (lambda q: (q, 1.0)), m, (lambda q: m * G * rig.gravity_along)
+    l0 = b.length(b.lower)[0]
+    inertia = b.inertia + b.mass * b.com ** 2 + rig.load_mass * b.tip ** 2
+    moment = (b.mass * b.com + rig.load_mass * b.tip) * G
+
+    def piston(q):
+        length, arm = b.length(q)
+        return length - l0, arm
+    return piston, inertia, (lambda q: -moment * math.cos(q))
+
+
+def stroke(rig: Rig) -> float:
+    b = rig.boom
+    return rig.stroke if b is None else b.length(b.upper)[0] - b.length(b.lower)[0]
+
+
 def rhs(rig: Rig, u: float):
     aa = math.pi / 4 * rig.bore ** 2
     ab = aa - math.pi / 4 * rig.rod ** 2
-    m = rig.slide_mass + rig.load_mass
+    piston, inertia, gravity = mechanics(rig)
+    full = stroke(rig)
     k = rig.rated_flow / math.sqrt(rig.rated_drop)
     i_ref = max(-rig.max_current, min(rig.max_current, rig.amp_gain * u))
     w = 2 * math.pi * rig.spool_hz
 
     def f(_t, y):
         q, v, pa, pb, i, x, xd = y
+        xp, arm = piston(q)
+        vp = arm * v                                      # rod speed, m/s
         op_pos = max(x - rig.overlap, 0.0)
         op_neg = max(-x - rig.overlap, 0.0)
         kn = k * rig.negative_flow_ratio
         leak = rig.piston_leakage * (pa - pb)
         qa = _edge(k, op_pos, rig.supply - pa, rig.laminar_below) - _edge(kn, op_neg, pa - rig.tank, rig.laminar_below) - leak
         qb = _edge(kn, op_neg, rig.supply - pb, rig.laminar_below) - _edge(k, op_pos, pb - rig.tank, rig.laminar_below) + leak
-        va = rig.dead_a + aa * q
-        vb = rig.dead_b + ab * (rig.stroke - q)
-        ca = va / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
-        cb = vb / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
-        force = pa * aa - pb * ab - rig.viscous * v - rig.coulomb * math.tanh(v / 1e-3) + m * G * rig.gravity_along
-        return [v, force / m, (qa - aa * v) / ca, (qb + ab * v) / cb,
+        ca = (rig.dead_a + aa * xp) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
+        cb = (rig.dead_b + ab * (full - xp)) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
+        force = pa * aa - pb * ab - rig.viscous * vp - rig.coulomb * math.tanh(vp / 1e-3)
+        return [v, (force * arm + gravity(q)) / inertia, (qa - aa * vp) / ca, (qb + ab * vp) / cb,
                 (i_ref - i) / rig.coil_tau, xd, w * w * (rig.spool_gain * i - x) - 2 * rig.spool_zeta * w * xd]
     return f
 
 
 def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float = 50.0, q0: float = 0.23,
                     kp: float = 100.0, jitter: float = 0.1, references=(0.12, 0.38), control_every: int = 1) -> np.ndarray:
-    """A P controller (kp in V/m, command clipped to +-10 V) tracking set-point steps held 1.5-4 s within
-    ``references`` (m), run at ``control_every`` x ``rate``; returns the logged rows (time s, sensor V,
+    """A P controller (kp in V/m or V/rad, command clipped to +-10 V) tracking set-point steps held 1.5-4 s within
+    ``references`` (m or rad), run at ``control_every`` x ``rate``; returns the logged rows (time s, sensor V,
     command V), every ``control_every``-th of the controller's (a logger slower than the loop)."""
     rng = np.random.default_rng(seed)
     steps_t, steps_r, t = [], [], 0.0
@@ -112,9 +161,9 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
         t += rng.uniform(1.5, 4.0)
     aa = math.pi / 4 * rig.bore ** 2
     ab = aa - math.pi / 4 * rig.rod ** 2
-    m = rig.slide_mass + rig.load_mass
-    pa0 = 0.5 * rig.supply                                   # at rest, holding the load: pa aa - pb ab = -m g along
-    pb0 = (pa0 * aa + m * G * rig.gravity_along) / ab
+    piston, _, gravity = mechanics(rig)
+    pa0 = 0.5 * rig.supply                                   # at rest, holding the load: (pa aa - pb ab) arm = -gravity
+    pb0 = (pa0 * aa + gravity(q0) / piston(q0)[1]) / ab
     y = np.array([q0, 0.0, pa0, pb0, 0.0, 0.0, 0.0])
     lsb = 10.0 / 2 ** rig.sensor_bits
     rows, t = [], 0.0
@@ -141,3 +190,32 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
             y = sol.y[:, -1]
         t += dt
     return np.array(rows)[::control_every]
+
+
+SPOOL_GAIN_PER_VOLT = 0.08 * 1.25        # templates: amplifier A/V x spool 1/A: stroke fraction per volt
+
+
+@dataclass(frozen=True)
+class Bench:
+    """A template rig as the textbook describes it: the template and its --set, the joint, the
+    template's nominal rig in this module's terms, a truth's values off it, and how its P loop runs."""
+    template: str
+    rig_set: tuple
+    joint: str
+    nominal: dict
+    off: dict
+    loop: dict
+    tolerance: float                      # m or rad: the replay's RMS limit
+    moved: float                          # m or rad: the replay's motion (std) at least
+
+
+BOOM = dict(boom=Boom(), load_mass=40.0, rod=0.03, dead_b=2.51327e-5, rated_flow=3.3e-4, viscous=5000.0,
+            sensor_a=0.5236, sensor_b=-2.618)
+BENCHES = {
+    "hanging": Bench("cylinder", ("incline_deg=-90",), "lift", dict(gravity_along=1.0),
+                     dict(rated_flow=2.4e-4, supply=1.26e7, load_mass=120.0, viscous=2600.0), dict(q0=0.23), 1e-3, 0.03),
+    "vertical": Bench("cylinder", ("orientation=vertical",), "lift", dict(gravity_along=-1.0),
+                      dict(rated_flow=2.4e-4, supply=1.26e7, load_mass=120.0, viscous=2600.0), dict(q0=0.23), 1e-3, 0.03),
+    "boom": Bench("boom", (), "boom", BOOM, dict(rated_flow=3.96e-4, supply=1.26e7, load_mass=50.0, viscous=6500.0),
+                  dict(q0=0.25, kp=45.0, references=(0.02, 0.68)), 1e-3, 0.08),
+}
