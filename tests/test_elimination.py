@@ -216,3 +216,44 @@ def test_a_flow_gain_kept_below_three_sigma_says_so_and_what_it_carries():
     assert "note" not in rows[1] and "note" not in rows[2]          # only the baseline, only when weak
     rows = [{"parameter": FLOW, "identified": True}]
     assert "note" not in mark_baseline(rows, {FLOW: None}, [GAIN])[0]
+
+
+def test_a_correlated_partner_the_kept_one_cannot_stand_in_for_stays():
+    """A supply pressure and a load the record cannot tell apart (correlation 0.995): the supply goes,
+    and the load, refitted alone, carries both. Where that pushes the load to an end of its range at a
+    cost the record rejects (a boom's tip load twice its spec's and the supply 13 % low: alone the
+    load needs more than its range), the supply stays, flagged, and both keep their fitted values;
+    where the cost barely rises, the supply goes as before."""
+    ps = "supply.pressure"
+    flow, supply, mass = FreeParameter(FLOW, 1e-5, 1e-3), FreeParameter(ps, 9.8e6, 1.61e7), FreeParameter(MASS, 20.0, 85.0)
+    corr = np.array([[1.0, 0.1, 0.1], [0.1, 1.0, 0.995], [0.1, 0.995, 1.0]])
+    first = oe.FitResult([flow, supply, mass], {FLOW: 4e-4, ps: 1.0e7, MASS: 60.0}, 1.0,
+                         sigma={FLOW: 1e-6, ps: 1e5, MASS: 1.0}, correlation=corr, cost_scale=0.01)
+    assert identifiability(first)[ps].startswith("correlation") and identifiability(first)[MASS] is None
+
+    def alone(cost):        # the load refitted with the supply at nominal: at its range's end
+        return oe.FitResult([flow, mass], {FLOW: 3.5e-4, MASS: 85.0}, cost, sigma={FLOW: 1e-6, MASS: 1.0},
+                            cost_scale=0.01)
+
+    restored = oe.FitResult([flow, supply, mass], {FLOW: 4e-4, ps: 1.0e7, MASS: 60.0}, 1.0,
+                            sigma={FLOW: 1e-6, ps: 1e5, MASS: 1.0}, correlation=corr, cost_scale=0.01)
+    script = [alone(1.5), restored]
+    asked = []
+
+    def refit(keep, current):
+        asked.append([fp.key for fp in keep])
+        return script.pop(0)
+
+    notes: dict[str, str] = {}
+    keep, final, dropped = eliminate([flow, supply, mass], first, identifiability, refit, keep_rank,
+                                     last=_is_flow, together=jointly_identified, protected=notes)
+    assert [fp.key for fp in keep] == [FLOW, ps, MASS] and dropped == {} and final is restored
+    assert asked == [[FLOW, MASS], [FLOW, ps, MASS]]
+    assert notes[ps].startswith("kept although correlation") and MASS in notes[ps]
+    assert notes[MASS].startswith(f"fixed together with {ps}")
+    # the cost rises by less than the 3-sigma level (9 x 0.01): the supply goes, then the load at its end
+    script = [alone(1.05), oe.FitResult([flow], {FLOW: 3.5e-4}, 1.2, sigma={FLOW: 1e-6}, cost_scale=0.01)]
+    notes = {}
+    keep, final, dropped = eliminate([flow, supply, mass], first, identifiability, lambda k, c: script.pop(0),
+                                     keep_rank, last=_is_flow, together=jointly_identified, protected=notes)
+    assert list(dropped) == [ps, MASS] and [fp.key for fp in keep] == [FLOW] and notes == {}

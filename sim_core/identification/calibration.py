@@ -313,8 +313,9 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
         return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
 
+    protected: dict[str, str] = {}
     keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank, last=is_baseline,
-                                       together=jointly_identified)
+                                       together=jointly_identified, protected=protected)
     if keep:
         cal_spec = current.spec
     else:
@@ -325,6 +326,9 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
     mark_baseline(changes, identifiability(final) if keep else {}, list(dropped))
+    for c in changes:
+        if c["parameter"] in protected:
+            c.setdefault("note", protected[c["parameter"]])
     if keep and dropped:
         mark_elasticities(changes, conditional.elasticities(final, [fp for fp in free if fp.key in dropped],
                                                             runner, problem))

@@ -230,7 +230,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
         else:
-            log(f"calibration: {c['parameter']} = {c['value']:.6g} (nominal {c['nominal']:.6g}) {conditional.given(c)}".rstrip())
+            log(f"calibration: {c['parameter']} = {c['value']:.6g} (nominal {c['nominal']:.6g}) {conditional.given(c)}".rstrip()
+                + (f"; {c['note']}" if c.get("note") else ""))
     # the candidates refit the identified model parameters with themselves. An effect parameter the
     # calibration switched on stays at its calibrated value (the candidate of that effect refits it),
     # except the spec's estimated ones: those are nuisances of the rig, refitted with every candidate

@@ -31,6 +31,13 @@ candidates within 1.2 points of each other, a deadband named as an area ratio). 
 the rest are judged again, so one of them carries what they explained together (its row says on
 which held ones it is conditional).
 
+Unless the kept partner cannot stand in: of two parameters the record cannot tell apart (a supply
+pressure and a load, correlated beyond 0.98) the one ranked later goes and its partner carries what
+they explained together, but where that partner is then pushed to an end of its range and the cost
+rises beyond the same chi-square level, the ratio they fix lies beyond what it can carry alone (a
+boom's tip load twice its spec's with the supply 13 % low: alone the load needed 89 kg of a range
+ending at 85, it went too, and a 2 % valve asymmetry was named on a clean log). The partner then
+stays, both keep their fitted values, and their rows say they are fixed together, not each.
 ``identifiability`` (calibration) says why a parameter is not identified and ``jointly_identified``
 (calibration) whether several are together; this module only decides which of them go, and when.
 """
@@ -60,7 +67,8 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
               judge: Callable[[oe.FitResult], dict[str, str | None]],
               refit: Callable[[list[FreeParameter], oe.FitResult], oe.FitResult],
               rank: Callable[[str], int], last: Callable[[str], bool] = lambda key: False,
-              together: Callable[[oe.FitResult, oe.FitResult, int], bool] | None = None
+              together: Callable[[oe.FitResult, oe.FitResult, int], bool] | None = None,
+              protected: dict[str, str] | None = None
               ) -> tuple[list[FreeParameter], oe.FitResult, dict[str, tuple[str, oe.FitResult]]]:
     """Drop the parameters of ``free`` the record cannot identify (module docstring) and refit the
     rest after each drop.
@@ -71,13 +79,17 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
     fit (the one the last parameter was dropped on when none is kept) and, per dropped key, why and
     the fit it was judged on. ``last(key)``: a baseline parameter (module docstring).
     ``together(fit, refit without k of its parameters, k)``: whether those k, each failing only by
-    |value/sigma|, are identified jointly (module docstring); None: never."""
+    |value/sigma|, are identified jointly (module docstring); None: never. ``protected``: filled with
+    the keys kept although judged unidentified, and why (a correlated partner the record needs), and
+    the kept parameters they were needed beside."""
     keep, current = list(free), first
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
+    protected = {} if protected is None else protected
+    stay: set[str] = set()      # correlated partners the record needs beside a kept parameter
     bound_only = False          # after a drop beside identified parameters only one pushed to an end goes
     while keep:
         verdict = judge(current)
-        failing = [fp for fp in keep if verdict.get(fp.key) is not None
+        failing = [fp for fp in keep if verdict.get(fp.key) is not None and fp.key not in stay
                    and (not bound_only or verdict[fp.key].startswith("at the"))]
         if not failing:
             break
@@ -103,8 +115,45 @@ def eliminate(free: list[FreeParameter], first: oe.FitResult,
         for fp in failing:
             dropped[fp.key] = (verdict[fp.key], current)
         keep = [fp for fp in keep if fp not in failing]
+        before = current
         if keep:
             current = trial if trial is not None else refit(keep, current)
+            needed = partners_needed(before, current, verdict, judge, failing, keep, together)
+            if needed:
+                # reset to nominal, a correlated partner pushed a kept parameter to an end of its range
+                # at a cost the record rejects: the two are fixed together, each within its range
+                # only beside the other, so the partner stays (flagged) and the rest is refitted
+                pushed, partners = needed
+                names = ", ".join(p.key for p in pushed)
+                for fp in partners:
+                    del dropped[fp.key]
+                    stay.add(fp.key)
+                    protected[fp.key] = (f"kept although {verdict[fp.key]}: reset to nominal it pushes {names} to an "
+                                         "end of the range; the record fixes them together, not each")
+                for fp in pushed:
+                    protected.setdefault(fp.key, f"fixed together with {', '.join(p.key for p in partners)}, not "
+                                                 "by itself (see its row)")
+                keep = [fp for fp in free if fp in keep or fp in partners]
+                current = refit(keep, before)
         if not every and not one_by_one:
             bound_only = True
     return keep, current, dropped
+
+
+def partners_needed(before: oe.FitResult, after: oe.FitResult, verdict: dict[str, str | None],
+                    judge: Callable[[oe.FitResult], dict[str, str | None]], gone: list[FreeParameter],
+                    keep: list[FreeParameter], together) -> tuple[list[FreeParameter], list[FreeParameter]] | None:
+    """(kept parameters pushed to an end of their range, the correlated partners whose reset pushed
+    them) when dropping ``gone`` did that and raised the cost beyond what ``together`` allows for as
+    many parameters; else None. A supply pressure and a load that the record cannot tell apart are
+    still both needed where their ratio lies beyond what either can carry alone: a boom's tip load
+    twice its spec's and the supply 13 % low, the load alone asked for 89 kg of a range ending at 85."""
+    partners = [fp for fp in gone if (verdict.get(fp.key) or "").startswith("correlation")]
+    if together is None or not partners or not after.ok:
+        return None
+    now = judge(after)
+    pushed = [fp for fp in keep if (now.get(fp.key) or "").startswith("at the")
+              and not (verdict.get(fp.key) or "").startswith("at the")]
+    if not pushed or not together(before, after, len(partners)):
+        return None
+    return pushed, partners

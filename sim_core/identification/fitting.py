@@ -114,6 +114,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
     fitted = final
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
+    protected: dict[str, str] = {}
     refits = [0]
     if final.ok:
         # what the record cannot identify goes back to nominal, by the calibration's rules (elimination.py)
@@ -126,7 +127,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             return out
 
         keep, final, dropped = eliminate(polish, fitted, identifiability, refit, keep_rank, last=is_baseline,
-                                         together=jointly_identified)
+                                         together=jointly_identified, protected=protected)
         if not keep:
             reset = fitted.spec.copy()
             for fp in polish:
@@ -167,6 +168,9 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     mark_conditional(changes)
     if final.free:
         mark_baseline(changes, identifiability(final), list(dropped))
+    for row in changes:
+        if row["parameter"] in protected:
+            row.setdefault("note", protected[row["parameter"]])
     reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
     if reset_keys and final.free:
         mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob))
