@@ -257,3 +257,23 @@ def test_a_correlated_partner_the_kept_one_cannot_stand_in_for_stays():
     keep, final, dropped = eliminate([flow, supply, mass], first, identifiability, lambda k, c: script.pop(0),
                                      keep_rank, last=_is_flow, together=jointly_identified, protected=notes)
     assert list(dropped) == [ps, MASS] and [fp.key for fp in keep] == [FLOW] and notes == {}
+
+
+def test_only_the_partner_of_the_pushed_parameter_stays():
+    """A sensor offset dropped for its correlation with the sensor's gain does not stand in for a load
+    pushed to its range's end (on a boom's flow-saturation record it stayed at -0.3 rad beside a load
+    at its end, and a valve asymmetry and an offset were named); the supply tied to that load does."""
+    from sim_core.identification.elimination import correlated_with, partners_needed
+
+    ps = "supply.pressure"
+    supply, offset, mass = FreeParameter(ps, 9.8e6, 1.61e7), FreeParameter(OFFSET, -0.5, 0.5), FreeParameter(MASS, 20.0, 85.0)
+    before = oe.FitResult([supply, offset, mass], {ps: 1e7, OFFSET: -0.3, MASS: 60.0}, 1.0, cost_scale=0.01)
+    after = oe.FitResult([mass], {MASS: 85.0}, 1.5, cost_scale=0.01)
+    pushed = {MASS: "at the upper end of its range [20, 85]: ..."}
+    tied_to_gain = {OFFSET: f"correlation -0.982 with {GAIN}: the record cannot tell them apart"}
+    tied_to_load = {ps: f"correlation +0.993 with {MASS}: the record cannot tell them apart"}
+    assert correlated_with(tied_to_gain[OFFSET]) == GAIN and correlated_with("|value/sigma| = 1 < 3") is None
+    assert partners_needed(before, after, tied_to_gain, lambda r: pushed, [offset], [mass], jointly_identified) is None
+    got = partners_needed(before, after, {**tied_to_gain, **tied_to_load}, lambda r: pushed, [supply, offset], [mass],
+                          jointly_identified)
+    assert got == ([mass], [supply])

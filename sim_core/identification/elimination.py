@@ -148,12 +148,22 @@ def partners_needed(before: oe.FitResult, after: oe.FitResult, verdict: dict[str
     many parameters; else None. A supply pressure and a load that the record cannot tell apart are
     still both needed where their ratio lies beyond what either can carry alone: a boom's tip load
     twice its spec's and the supply 13 % low, the load alone asked for 89 kg of a range ending at 85."""
-    partners = [fp for fp in gone if (verdict.get(fp.key) or "").startswith("correlation")]
-    if together is None or not partners or not after.ok:
+    if together is None or not after.ok:
         return None
     now = judge(after)
     pushed = [fp for fp in keep if (now.get(fp.key) or "").startswith("at the")
               and not (verdict.get(fp.key) or "").startswith("at the")]
-    if not pushed or not together(before, after, len(partners)):
+    # only a partner of a pushed one: the one its correlation was with (a sensor offset tied to the
+    # sensor's gain does not stand in for a load that something else pushed)
+    partners = [fp for fp in gone if any(correlated_with(verdict.get(fp.key)) == p.key for p in pushed)]
+    if not partners or not together(before, after, len(partners)):
         return None
-    return pushed, partners
+    return [p for p in pushed if any(correlated_with(verdict.get(fp.key)) == p.key for fp in partners)], partners
+
+
+def correlated_with(reason: str | None) -> str | None:
+    """The key a 'correlation ... with KEY: ...' reason of the calibration's ``identifiability`` names."""
+    if not reason or not reason.startswith("correlation"):
+        return None
+    head = reason.split(": ", 1)[0]
+    return head.rsplit(" with ", 1)[1] if " with " in head else None
