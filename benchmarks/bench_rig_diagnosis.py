@@ -73,6 +73,16 @@ def cli(*args) -> None:
         raise RuntimeError(f"hydrohil {' '.join(map(str, args[:2]))} failed: {p.stderr.strip()[-800:]}")
 
 
+def diagnose_log(work: Path, rig: Path, joint: str) -> tuple[dict, float]:
+    """``work/log.csv`` (headerless: time s, sensor volts, command V) through ``hydrohil import`` and
+    ``hydrohil diagnose`` the user's way: (diagnosis.json, seconds for both)."""
+    t0 = time.perf_counter()
+    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
+    cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
+    return json.loads((work / "rep" / "diagnosis.json").read_text()), time.perf_counter() - t0
+
+
 REFERENCES = {"steps": reference_steps, "sine": sine_reference}
 
 
@@ -106,12 +116,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
         rig = work / "rig_measured"
         shutil.copytree(work / "rig", rig)
         measured(rig, {k: estimable(spec, k)[1] * off.get(k, 1.0) for name in measured_keys for k in paths[name]})
-    t0 = time.perf_counter()
-    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
-        "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2")
-    cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
-    seconds = time.perf_counter() - t0
-    d = json.loads((work / "rep" / "diagnosis.json").read_text())
+    d, seconds = diagnose_log(work, rig, joint)
     named = [s["effect"] for s in d["selected"]]
     # a wrong name the report itself marks ambiguous, with the hidden effect as its runner-up
     flagged = any(s.get("ambiguous") and (s.get("runner_up") or {}).get("effect") == effect for s in d["selected"])

@@ -35,7 +35,6 @@ import argparse
 import json
 import math
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -47,7 +46,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the textbook rig and the helper the tests use
 
-from rig_records import measured  # noqa: E402
+from bench_rig_diagnosis import cli, diagnose_log  # noqa: E402  (the same commands, the user's way)
+from rig_records import measured, write_headerless  # noqa: E402
 from textbook_cylinder import BENCHES, SPOOL_GAIN_PER_VOLT, Rig, closed_loop_log  # noqa: E402
 
 TOLERANCE = 0.15
@@ -94,25 +94,14 @@ def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: in
     work.mkdir(parents=True)
     rig = work / "rig"
 
-    def cli(*args):
-        proc = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True,
-                              cwd=ROOT)
-        if proc.returncode:
-            raise RuntimeError(f"hydrohil {args[0]}: {proc.stderr.strip()[-300:]}")
-
     j = bench.joint
     cli("rig", "new", bench.template, "--out", rig, *[a for kv in bench.rig_set for a in ("--set", kv)])
     if cause == "seal_measured":
         measured(rig, {"supply.pressure": off["supply"], f"effects.payload.{j}.mass": off["load_mass"]})
     rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed,
                            **{**bench.loop, "q0": rng.uniform(*draws["start"])}, control_every=control_every)
-    np.savetxt(work / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
-    t0 = time.perf_counter()
-    cli("import", work / "log.csv", "--robot", rig, "--out", work / "rec.csv", "--no-header",
-        "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2")
-    cli("diagnose", "--robot", rig, work / "rec.csv", "--report", work / "rep", "--quiet")
-    seconds = time.perf_counter() - t0
-    d = json.loads((work / "rep" / "diagnosis.json").read_text())
+    write_headerless(rows, work / "log.csv")
+    d, seconds = diagnose_log(work, rig, j)
     named = [s["effect"] for s in d["selected"]]
     error = None
     if expect:

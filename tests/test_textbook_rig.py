@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pytest
 
+from rig_records import measured, write_headerless
 from textbook_cylinder import BENCHES, SPOOL_GAIN_PER_VOLT, Bench, Rig, closed_loop_log
 
 
@@ -78,7 +79,7 @@ def test_the_kernel_moves_the_joint_as_the_textbook_model_does(cli, tmp_path, ri
 
 def _log(tmp_path, bench: Bench, textbook_rig: Rig, seed: int):
     rows = closed_loop_log(textbook_rig, seed=seed, **bench.loop)
-    np.savetxt(tmp_path / "log.csv", rows, delimiter=",", fmt=["%.4f", "%.4f", "%.3f"])
+    write_headerless(rows, tmp_path / "log.csv")
     j = bench.joint
     return ("--no-header", "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2")
 
@@ -129,8 +130,6 @@ def test_a_measured_rigs_seal_friction_is_named_or_listed_as_close(cli, tmp_path
     volt for a Coulomb friction, a valve asymmetry, an area ratio and a payload. Whichever is named,
     the friction is named or listed among the rivals within the margin, with what would decide, in
     diagnosis.json and on the command line."""
-    from rig_records import measured
-
     bench = BENCHES[rig_name]
     rig = _rig_dir(cli, tmp_path / "rig", bench)
     measured(rig, {"supply.pressure": bench.off["supply"], "effects.payload.lift.mass": bench.off["load_mass"]})

@@ -15,7 +15,7 @@ a difference between the two codes that it names is a false alarm (or a bug in o
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -86,9 +86,6 @@ class Rig:
     sensor_bits: int = 12               # over 0..10 V
     boom: Boom | None = None            # the cylinder raises this boom (q in rad; load_mass at its tip,
                                         # slide_mass, gravity_along and stroke unused), else a slide
-
-    def with_(self, **kw) -> "Rig":
-        return replace(self, **kw)
 
 
 def _edge(k: float, opening: float, dp: float, dp_lam: float) -> float:

@@ -42,7 +42,7 @@ from scipy.stats import chi2, norm
 
 from . import conditional
 from . import output_error as oe
-from .elimination import eliminate
+from .elimination import correlated_with, eliminate
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from .record import Record
 from .simulation import Runner
@@ -326,9 +326,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     changes = mark_conditional([_row(fp, nominal, dropped[fp.key][1] if fp.key in dropped else res, final,
                                      dropped[fp.key][0] if fp.key in dropped else None, why) for fp in free])
     mark_baseline(changes, identifiability(final) if keep else {}, list(dropped))
-    for c in changes:
-        if c["parameter"] in protected:
-            c.setdefault("note", protected[c["parameter"]])
+    mark_kept(changes, protected)
     if keep and dropped:
         mark_elasticities(changes, conditional.elasticities(final, [fp for fp in free if fp.key in dropped],
                                                             runner, problem))
@@ -413,10 +411,9 @@ def mark_conditional(changes: list[dict]) -> list[dict]:
     """A kept partner of a parameter dropped for their correlation carries what both explained: its
     row says so (``conditional_on``: the parameters held at nominal that its value depends on)."""
     for c in changes:
-        tail = f"with {c['parameter']}: the record cannot tell them apart"
         for other in changes:
-            reason = other.get("not_identified_because") or ""
-            if reason.startswith("correlation") and reason.endswith(tail) and other["parameter"] not in c.get("conditional_on", []):
+            if (correlated_with(other.get("not_identified_because")) == c["parameter"]
+                    and other["parameter"] not in c.get("conditional_on", [])):
                 c.setdefault("conditional_on", []).append(other["parameter"])
     return changes
 
@@ -429,6 +426,16 @@ def mark_baseline(changes: list[dict], verdict: dict[str, str | None], dropped: 
         if c["identified"] and is_baseline(c["parameter"]) and verdict.get(c["parameter"]):
             c["note"] = f"kept as the baseline ({verdict[c['parameter']]})"
             c["conditional_on"] = sorted(set(c.get("conditional_on", [])) | set(dropped))
+    return changes
+
+
+def mark_kept(changes: list[dict], notes: dict[str, str]) -> list[dict]:
+    """The rows of parameters the elimination kept although not identified by themselves, or kept
+    beside such a one (``notes``: key -> why, from ``eliminate``'s ``protected``), say so (``note``;
+    a baseline's note stays)."""
+    for c in changes:
+        if c["parameter"] in notes:
+            c.setdefault("note", notes[c["parameter"]])
     return changes
 
 

@@ -155,10 +155,11 @@ def partners_needed(before: oe.FitResult, after: oe.FitResult, verdict: dict[str
               and not (verdict.get(fp.key) or "").startswith("at the")]
     # only a partner of a pushed one: the one its correlation was with (a sensor offset tied to the
     # sensor's gain does not stand in for a load that something else pushed)
-    partners = [fp for fp in gone if any(correlated_with(verdict.get(fp.key)) == p.key for p in pushed)]
+    tied = {fp.key: correlated_with(verdict.get(fp.key)) for fp in gone}
+    partners = [fp for fp in gone if tied[fp.key] in {p.key for p in pushed}]
     if not partners or not together(before, after, len(partners)):
         return None
-    return [p for p in pushed if any(correlated_with(verdict.get(fp.key)) == p.key for fp in partners)], partners
+    return [p for p in pushed if p.key in {tied[fp.key] for fp in partners}], partners
 
 
 def correlated_with(reason: str | None) -> str | None:

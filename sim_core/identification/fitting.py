@@ -13,7 +13,7 @@ import numpy as np
 from . import output_error as oe
 from . import conditional
 from .calibration import (identifiability, is_baseline, jointly_identified, keep_rank, mark_baseline, mark_conditional,
-                          mark_elasticities, plan, scan_flow_gains)
+                          mark_elasticities, mark_kept, plan, scan_flow_gains)
 from .elimination import eliminate
 from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
@@ -168,9 +168,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     mark_conditional(changes)
     if final.free:
         mark_baseline(changes, identifiability(final), list(dropped))
-    for row in changes:
-        if row["parameter"] in protected:
-            row.setdefault("note", protected[row["parameter"]])
+    mark_kept(changes, protected)
     reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
     if reset_keys and final.free:
         mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob))
