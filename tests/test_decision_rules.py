@@ -3,7 +3,7 @@
 Each test sets up scores on both sides of one rule, so deleting or inverting the rule fails it:
 acceptance (gain threshold, noise spread, BIC, search bound, 3-sigma identifiability), forward
 selection (best passing wins; a masked effect is re-evaluated next round; stop at the noise
-ceiling), the masked-pair search, backward pass, a named effect's secondary parameters held at their default, final check, ambiguity and ``decided_by``, the verdict with its residual
+ceiling; other first picks when the greedy path misses the record), the masked-pair search, backward pass, a named effect's secondary parameters held at their default, final check, ambiguity and ``decided_by``, the verdict with its residual
 evidence, and the readable gain scale.
 """
 
@@ -178,6 +178,64 @@ def test_forward_stops_at_max_effects():
              (frozenset({A.label}), B.label): (5.0, -1.0), (frozenset({A.label}), C.label): (0.5, -1.0)}
     fw, calls = run_forward(table, max_effects=2)
     assert len(fw.accepted) == 2 and fw.stopped == "reached 2 effects"
+
+
+# ---- other first picks when the greedy path misses the record ------------------------------------------
+def restarted(scores, misfit=True, ceiling=100.0):
+    """forward() then restart() on a table where the greedy pick A (10 points) leads nowhere and B (8)
+    with C (which loses alone, and passes once B is in) explains the record. ``scores``: model -> score.
+    The search's state (what extend adds) is put back before each path and left as the kept path's."""
+    AB, BC = frozenset({A.label}), frozenset({B.label})
+    table = {(E, A.label): (10.0, -5.0), (E, B.label): (8.0, -4.0), (E, C.label): (-3.0, 1.0),
+             (AB, B.label): (0.5, -1.0), (AB, C.label): (0.5, -1.0),
+             (BC, A.label): (0.5, -1.0), (BC, C.label): (20.0, -9.0),
+             (frozenset({B.label, C.label}), A.label): (0.5, -1.0)}
+    calls, state = [], []
+
+    def extend(m, ev):
+        state.append(ev.candidate.label)
+        return m | {ev.candidate.label}
+
+    def checkpoint():
+        saved = list(state)
+        return lambda: state.__setitem__(slice(None), saved)
+
+    def run(first=None):
+        return dc.forward([A, B, C], frozenset(), evaluate_round=table_round(table, calls), extend=extend,
+                          score=lambda m: scores.get(m, 0.0), ceiling=ceiling, first=first)
+
+    to_start = checkpoint()
+    greedy = run()
+    kept = dc.restart(greedy, rerun=lambda ev: run((greedy.rounds[0], ev)), score=lambda m: scores.get(m, 0.0),
+                      ceiling=ceiling, misfit=lambda m: misfit, to_start=to_start, checkpoint=checkpoint)
+    return greedy, kept, calls, state
+
+
+def test_a_greedy_path_that_misses_the_record_is_run_again_from_the_next_first_pick():
+    greedy, kept, calls, state = restarted({frozenset({A.label}): 70.0, frozenset({B.label}): 75.0,
+                                            frozenset({B.label, C.label}): 99.0})
+    assert [e.candidate.label for e in greedy.accepted] == [A.label]
+    assert [e.candidate.label for e in kept.accepted] == [B.label, C.label]
+    assert kept.model == {B.label, C.label} and state == [B.label, C.label]
+    assert kept.rounds[0] is greedy.rounds[0]                 # the first round is not fitted again
+    assert sum(r == 1 for r, _ in calls) == 1
+    assert "started from" in kept.stopped and A.label in kept.stopped
+    assert dc.other_starts(greedy) == [kept.accepted[0]]      # C does not pass alone: not a start
+
+
+def test_no_other_path_when_the_greedy_one_explains_the_record_or_its_residual_is_white():
+    for scores, misfit in (({frozenset({A.label}): 91.0, frozenset({B.label, C.label}): 99.0}, True),
+                           ({frozenset({A.label}): 70.0, frozenset({B.label, C.label}): 99.0}, False)):
+        greedy, kept, calls, state = restarted(scores, misfit=misfit)
+        assert kept is greedy and state == [A.label] and len(calls) == 2
+    assert dc.FAR_POINTS == 10.0
+
+
+def test_another_path_is_kept_only_when_it_scores_half_a_point_more():
+    greedy, kept, _, state = restarted({frozenset({A.label}): 70.0, frozenset({B.label, C.label}): 70.4})
+    assert kept is greedy and state == [A.label]              # the greedy path's state, put back
+    greedy, kept, _, state = restarted({frozenset({A.label}): 70.0, frozenset({B.label, C.label}): 70.6})
+    assert kept is not greedy and state == [B.label, C.label]
 
 
 # ---- masked pairs ------------------------------------------------------------------------------------

@@ -97,6 +97,13 @@ HIDDEN = {
     "piston_leak": ({"piston_leakage": 3e-12}, "hanging", 2, ("leakage", "internal", 3e-12)),
     "bus_delay": ({"command_delay": 0.05}, "vertical", 3, ("delay", "delay", 0.05)),
     "bus_delay_boom": ({"command_delay": 0.06}, "boom", 3, ("delay", "delay", 0.06)),
+    "null_bias": ({"null_bias": -0.02}, "hanging", 1, ("valve_offset", "offset", -0.02 / SPOOL_GAIN_PER_VOLT)),
+    # two causes at once: beside stronger retract edges an overlap alone makes the model worse
+    "overlap_and_stronger_edges": ({"overlap": 0.045, "negative_flow_ratio": 1.45}, "vertical", 2,
+                                   ("deadband", "width", 0.045 / SPOOL_GAIN_PER_VOLT), ("valve_asymmetry", "ratio", 1.45)),
+    "null_bias_and_overlap_boom": ({"null_bias": 0.015, "overlap": 0.06}, "boom", 2,
+                                   ("valve_offset", "offset", 0.015 / SPOOL_GAIN_PER_VOLT),
+                                   ("deadband", "width", 0.06 / SPOOL_GAIN_PER_VOLT)),
 }
 
 
@@ -104,9 +111,10 @@ HIDDEN = {
 def test_diagnose_says_what_the_textbook_rig_has_that_the_template_has_not(cli, tmp_path, case):
     """The four commands of the README on the textbook rig's log: a clean rig is no discrepancy; a
     hidden cause is named as its effect with the parameter within 10 % (15 % for a leak, whose size
-    hangs on the supply the calibration holds) of the truth, and nothing else is named
-    (benchmarks/bench_textbook_rig.py over 6 draws each: within 3 %, a leak within 14.4 %)."""
-    physical, rig_name, seed, expect = HIDDEN[case]
+    hangs on the supply the calibration holds, and for two causes at once) of the truth, and nothing
+    else is named (benchmarks/bench_textbook_rig.py over 9 draws each: within 5 %, a leak within
+    14.4 %; two causes within 12.7 %)."""
+    physical, rig_name, seed, *expect = HIDDEN[case]
     bench = BENCHES[rig_name]
     rig = _rig_dir(cli, tmp_path / "rig", bench)
     reading = _log(tmp_path, bench, _textbook(bench, True, **physical), seed)
@@ -114,13 +122,14 @@ def test_diagnose_says_what_the_textbook_rig_has_that_the_template_has_not(cli, 
     proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
-    if expect is None:
+    if expect == [None]:
         assert d["verdict"] == "no_significant_discrepancy", d["selected"]
         return
-    effect, param, truth = expect
     assert d["verdict"] == "discrepancy", d["decision"]
-    assert [s["effect"] for s in d["selected"]] == [effect]
-    assert d["selected"][0]["params"][param] == pytest.approx(truth, rel=0.15 if effect == "leakage" else 0.10)
+    assert sorted(s["effect"] for s in d["selected"]) == sorted(e for e, _, _ in expect)
+    for effect, param, truth in expect:
+        named = next(s for s in d["selected"] if s["effect"] == effect)
+        assert named["params"][param] == pytest.approx(truth, rel=0.15 if effect == "leakage" or len(expect) > 1 else 0.10)
 
 
 @pytest.mark.parametrize("rig_name,seed", [("hanging", 2), ("vertical", 3)])

@@ -71,6 +71,8 @@ class Rig:
     overlap: float = 0.0                # spool stroke fraction: no flow below it (geometric: the
                                         # opening is |x| - overlap, a full stroke opens 1 - overlap)
     negative_flow_ratio: float = 1.0    # -; flow of the negative-travel edges over the positive ones
+    null_bias: float = 0.0              # spool stroke fraction the spool sits off its centre at zero
+                                        # current (a valve's null shift: it opens as if commanded)
     piston_leakage: float = 0.0         # m^3/(s Pa); laminar leakage across the piston, A to B
     command_delay: float = 0.0          # s; dead time between the controller's output and the amplifier
     laminar_below: float = 1.0e5        # Pa
@@ -131,8 +133,9 @@ def rhs(rig: Rig, u: float):
         q, v, pa, pb, i, x, xd = y
         xp, arm = piston(q)
         vp = arm * v                                      # rod speed, m/s
-        op_pos = max(x - rig.overlap, 0.0)
-        op_neg = max(-x - rig.overlap, 0.0)
+        xs = x + rig.null_bias
+        op_pos = max(xs - rig.overlap, 0.0)
+        op_neg = max(-xs - rig.overlap, 0.0)
         kn = k * rig.negative_flow_ratio
         leak = rig.piston_leakage * (pa - pb)
         qa = _edge(k, op_pos, rig.supply - pa, rig.laminar_below) - _edge(kn, op_neg, pa - rig.tank, rig.laminar_below) - leak

@@ -57,6 +57,7 @@ FAR_POINTS = 10.0           # a model this far (score points) below its noise ce
 EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
 EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
 EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
+OTHER_STARTS = 2            # first-round runners-up a forward path starts from when the greedy path misses the record
 
 NAMED = "discrepancy"
 NONE = "no_significant_discrepancy"
@@ -236,7 +237,7 @@ def member_evaluations(pair_ev: Evaluation) -> list[Evaluation]:
 
 def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: Callable, score: Callable,
             ceiling: float, max_effects: int = MAX_EFFECTS, log=None, evaluate_pairs: Callable | None = None,
-            misfit: Callable | None = None) -> Forward:
+            misfit: Callable | None = None, first: tuple[list[Evaluation], Evaluation] | None = None) -> Forward:
     """Greedy forward selection, with the masked-pair search.
 
     ``evaluate_round(pool, model, accepted, round)`` fits and judges every candidate of ``pool`` on
@@ -245,7 +246,8 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
     values; ``score(model)`` its validation score. ``evaluate_pairs(pairs, model, accepted, round)``
     (pairs: :func:`rank_pairs`) fits and judges pairs jointly; it is called when no single candidate
     of a round passes, the model is not near its noise ceiling and ``misfit(model)`` (its residual
-    tests fail) holds. None: no pair search."""
+    tests fail) holds. None: no pair search. ``first``: (the first round's Evaluations, the one to
+    take from them) instead of fitting that round and taking its best (:func:`other_starts`)."""
     log = log or (lambda msg: None)
     accepted: list[Evaluation] = []
     rounds: list[list[Evaluation]] = []
@@ -264,9 +266,13 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
             stopped = "no candidates left"
             break
         have = [(e.candidate, e.effect_params()) for e in accepted]
-        evals = evaluate_round(pool, model, have, r)
-        rounds.append(evals)
-        best = best_passing(evals)
+        if r == 1 and first is not None:
+            evals, best = first
+            rounds.append(evals)
+        else:
+            evals = evaluate_round(pool, model, have, r)
+            rounds.append(evals)
+            best = best_passing(evals)
         if best is None:
             stopped = "no candidate passed" if r == 1 else "no further candidate passed"
             if (evaluate_pairs is None or len(accepted) + 2 > max_effects or near_ceiling(score(model), ceiling)
@@ -294,6 +300,64 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
             stopped = f"reached {max_effects} effects"
             break
     return Forward(accepted, rounds, model, stopped, pairs_tried, at_ceiling)
+
+
+def other_starts(fw: Forward, k: int = OTHER_STARTS) -> list[Evaluation]:
+    """The first round's passing candidates other than the one greedy selection took there, largest
+    gain first (at most ``k``)."""
+    if not fw.rounds or not fw.accepted:
+        return []
+    taken = {e.key for e in fw.accepted if e.round == 1}
+    ok = [e for e in fw.rounds[0] if e.accepted_ok and e.key not in taken]
+    return sorted(ok, key=lambda e: -e.gain)[:k]
+
+
+def restart(fw: Forward, *, rerun: Callable, score: Callable, ceiling: float, misfit: Callable | None = None,
+            to_start: Callable | None = None, checkpoint: Callable | None = None, log=None,
+            k: int = OTHER_STARTS) -> Forward:
+    """Greedy selection takes the first round's best single with nothing else in the model, and the
+    rest of the path follows from it. That single can stand for two others, each of which fits worse
+    alone than it (a leak for a spool overlap with weaker retract edges: the overlap alone makes the
+    model worse). When the greedy path's model misses the record (more than FAR_POINTS below its
+    noise ceiling while ``misfit(model)``, its residual tests, fails), forward selection runs again
+    from each of the first round's next best passing candidates (:func:`other_starts`, at most
+    ``k``; it stops at the first path whose model no longer misses the record), and the path whose
+    model scores highest is kept when it beats the greedy one by EXCHANGE_POINTS.
+
+    ``rerun(ev)``: forward selection with ``ev`` taken in the first round. ``to_start()``: puts the
+    search's state (what forward selection and recalibration changed) back as it was before the
+    greedy path; ``checkpoint()`` returns such a callable for the state at its call. Returns the
+    path kept, with the state it left."""
+    log = log or (lambda msg: None)
+    if misfit is None or not fw.accepted:
+        return fw
+    s0 = score(fw.model)
+    if not ceiling - s0 > FAR_POINTS or not misfit(fw.model):
+        return fw
+    starts = other_starts(fw, k)
+    if not starts:
+        return fw
+    best, best_s = fw, s0
+    keep = checkpoint() if checkpoint is not None else None
+    for ev in starts:
+        if to_start is not None:
+            to_start()
+        log(f"the path from {fw.accepted[0].candidate.label} ends {ceiling - s0:.1f} points below the noise ceiling: "
+            f"forward selection again from {ev.candidate.label}")
+        alt = rerun(ev)
+        s = score(alt.model)
+        if s > best_s + EXCHANGE_POINTS:
+            best, best_s = alt, s
+            keep = checkpoint() if checkpoint is not None else None
+        if not ceiling - s > FAR_POINTS:
+            break
+    if keep is not None:
+        keep()
+    if best is not fw:
+        best.stopped += (f"; started from {best.accepted[0].candidate.label} in place of "
+                         f"{fw.accepted[0].candidate.label}, whose path ended {ceiling - s0:.1f} points below the "
+                         f"noise ceiling (score {s0:.1f} -> {best_s:.1f})")
+    return best
 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,

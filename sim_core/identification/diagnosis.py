@@ -269,6 +269,14 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             pending.remove(k)
         return again.spec
 
+    def checkpoint():
+        """A callable that puts what ``recalibrate`` changes back as it is now."""
+        saved = (list(pending), list(keys), list(recalibrations))
+
+        def back():
+            pending[:], keys[:], recalibrations[:] = saved
+        return back
+
     loop = detect_closed_loop(rec, spec)
     if loop["closed_loop"]:
         notes.append(loop["note"])
@@ -303,7 +311,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                  uncalibrated={c["parameter"]: c["nominal"] for c in cal.changes if c["parameter"] in nuisance})
     # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
-                 recalibrate=recalibrate, stand_ins=pl.stand_ins,
+                 recalibrate=recalibrate, stand_ins=pl.stand_ins, checkpoint=checkpoint,
                  misfit=lambda out: any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values()))
     if sel.stand_ins:
         # a stand-in took an effect's place: it is a calibration finding, so the baseline is calibrated

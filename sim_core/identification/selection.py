@@ -39,7 +39,7 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop,
+                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop, restart,
                        simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, declared, free_parameter
@@ -348,7 +348,7 @@ class Selection:
 
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
            max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None,
-           stand_ins: dict[str, list[FreeParameter]] | None = None) -> Selection:
+           stand_ins: dict[str, list[FreeParameter]] | None = None, checkpoint: Callable | None = None) -> Selection:
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
     (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
     of candidate fits, pair fits, the validation score, a refit without one effect.
@@ -356,7 +356,9 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     change ``st.calib_keys`` in place); None: the model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
     condition for the pair search); None: no pair search. ``stand_ins``: effect name -> the held
     nominal parameters it must beat (calibration.Plan.stand_ins; decision.stand_in), freed in its place
-    after the other passes; one that takes the place joins ``st.calib_keys``."""
+    after the other passes; one that takes the place joins ``st.calib_keys``. ``checkpoint()``: a
+    callable that puts the caller's state that ``recalibrate`` changes back as it was at the call
+    (decision.restart runs forward selection again from other first picks)."""
     log = log or (lambda msg: None)
     ceilings = channel_ceilings(st, st.val.joints)
     ceiling = score_ceiling(ceilings)
@@ -382,11 +384,29 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             log(f"refitted the model with {ev.candidate.label}: validation score {scores[0]:.2f} -> {scores[1]:.2f}")
         return polished
 
+    def snapshot():
+        outer = checkpoint() if checkpoint is not None else None
+        saved_added, saved_keys = list(added), list(st.calib_keys)
+
+        def back():
+            if outer is not None:
+                outer()
+            added[:] = saved_added
+            st.calib_keys[:] = saved_keys
+        return back
+
+    model_misfit = None if misfit is None else (lambda model: misfit(base.outputs(model)))
+
+    def run(first=None):
+        return forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
+                       score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
+                       evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first)
+
     try:
-        fw = forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
-                     score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
-                     evaluate_pairs=None if misfit is None else evaluate_pairs,
-                     misfit=None if misfit is None else (lambda model: misfit(base.outputs(model))))
+        to_start = snapshot()
+        fw = run()
+        fw = restart(fw, rerun=lambda ev: run((fw.rounds[0], ev)), score=base.score, ceiling=ceiling,
+                     misfit=model_misfit, to_start=to_start, checkpoint=snapshot, log=log)
     finally:
         side.close()
     model, accepted = fw.model, fw.accepted
