@@ -206,8 +206,12 @@ def restarted(scores, misfit=True, ceiling=100.0):
 
     to_start = checkpoint()
     greedy = run()
+    def misses(m):        # the model's validation fits: one channel, its score
+        f = scores.get(m, 0.0)
+        return dc.misses_record({"j2": {"angle": f, "score": f}}, ceiling, {"j2": {"angle": ceiling}}, misfit)
+
     kept = dc.restart(greedy, rerun=lambda ev: run((greedy.rounds[0], ev)), score=lambda m: scores.get(m, 0.0),
-                      ceiling=ceiling, misfit=lambda m: misfit, to_start=to_start, checkpoint=checkpoint)
+                      misses=misses, to_start=to_start, checkpoint=checkpoint)
     return greedy, kept, calls, state
 
 
@@ -229,6 +233,18 @@ def test_no_other_path_when_the_greedy_one_explains_the_record_or_its_residual_i
         greedy, kept, calls, state = restarted(scores, misfit=misfit)
         assert kept is greedy and state == [A.label] and len(calls) == 2
     assert dc.FAR_POINTS == 10.0
+
+
+def test_a_model_misses_the_record_by_its_score_one_channel_or_an_angle_below_zero_with_its_residual_failing():
+    ceilings = {"j2": {"angle": 99.0, "velocity": 97.0}}
+
+    def fits(angle, velocity):
+        return {"j2": {"angle": angle, "velocity": velocity, "score": (angle + velocity) / 2}}
+    assert not dc.misses_record(fits(95.0, 90.0), 98.0, ceilings, True)
+    assert dc.misses_record(fits(80.0, 80.0), 98.0, ceilings, True)           # the score 18 points under
+    assert dc.misses_record(fits(97.0, 85.0), 98.0, ceilings, True)           # the velocity 12 under its own
+    assert dc.misses_record(fits(-5.0, 99.0), 98.0, ceilings, False)          # the angle further off than its mean
+    assert not dc.misses_record(fits(80.0, 80.0), 98.0, ceilings, False)      # white residual: noise, not a miss
 
 
 def test_another_path_is_kept_only_when_it_scores_half_a_point_more():

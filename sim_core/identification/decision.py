@@ -312,52 +312,64 @@ def other_starts(fw: Forward, k: int = OTHER_STARTS) -> list[Evaluation]:
     return sorted(ok, key=lambda e: -e.gain)[:k]
 
 
-def restart(fw: Forward, *, rerun: Callable, score: Callable, ceiling: float, misfit: Callable | None = None,
+def restart(fw: Forward, *, rerun: Callable, score: Callable, misses: Callable | None = None,
             to_start: Callable | None = None, checkpoint: Callable | None = None, log=None,
             k: int = OTHER_STARTS) -> Forward:
     """Greedy selection takes the first round's best single with nothing else in the model, and the
     rest of the path follows from it. That single can stand for two others, each of which fits worse
     alone than it (a leak for a spool overlap with weaker retract edges: the overlap alone makes the
-    model worse). When the greedy path's model misses the record (more than FAR_POINTS below its
-    noise ceiling while ``misfit(model)``, its residual tests, fails), forward selection runs again
-    from each of the first round's next best passing candidates (:func:`other_starts`, at most
-    ``k``; it stops at the first path whose model no longer misses the record), and the path whose
-    model scores highest is kept when it beats the greedy one by EXCHANGE_POINTS.
+    model worse). When the greedy path's model misses the record (``misses(model)``:
+    :func:`misses_record` on its validation fits), forward selection runs again from each of the
+    first round's next best passing candidates (:func:`other_starts`, at most ``k``; it stops at the
+    first path whose model no longer misses the record), and the path whose model scores highest is
+    kept when it beats the greedy one by EXCHANGE_POINTS.
 
     ``rerun(ev)``: forward selection with ``ev`` taken in the first round. ``to_start()``: puts the
     search's state (what forward selection and recalibration changed) back as it was before the
     greedy path; ``checkpoint()`` returns such a callable for the state at its call. Returns the
     path kept, with the state it left."""
     log = log or (lambda msg: None)
-    if misfit is None or not fw.accepted:
-        return fw
-    s0 = score(fw.model)
-    if not ceiling - s0 > FAR_POINTS or not misfit(fw.model):
+    if misses is None or not fw.accepted or not misses(fw.model):
         return fw
     starts = other_starts(fw, k)
     if not starts:
         return fw
+    s0 = score(fw.model)
     best, best_s = fw, s0
     keep = checkpoint() if checkpoint is not None else None
     for ev in starts:
         if to_start is not None:
             to_start()
-        log(f"the path from {fw.accepted[0].candidate.label} ends {ceiling - s0:.1f} points below the noise ceiling: "
-            f"forward selection again from {ev.candidate.label}")
+        log(f"the path from {fw.accepted[0].candidate.label} misses the record (score {s0:.1f}): forward "
+            f"selection again from {ev.candidate.label}")
         alt = rerun(ev)
         s = score(alt.model)
         if s > best_s + EXCHANGE_POINTS:
             best, best_s = alt, s
             keep = checkpoint() if checkpoint is not None else None
-        if not ceiling - s > FAR_POINTS:
+        if not misses(alt.model):
             break
     if keep is not None:
         keep()
     if best is not fw:
         best.stopped += (f"; started from {best.accepted[0].candidate.label} in place of "
-                         f"{fw.accepted[0].candidate.label}, whose path ended {ceiling - s0:.1f} points below the "
-                         f"noise ceiling (score {s0:.1f} -> {best_s:.1f})")
+                         f"{fw.accepted[0].candidate.label}, whose path missed the record (score {s0:.1f} -> "
+                         f"{best_s:.1f})")
     return best
+
+
+def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_ceilings: dict[str, dict[str, float]],
+                  residual_fails: bool) -> bool:
+    """Whether a model with these validation fits (joint -> channel -> fit, with its "score") would be
+    reported as not explaining the record (:func:`unexplained_reasons`' rules on the fits alone: an
+    angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
+    while the residual tests fail)."""
+    joints = list(fits)
+    score = sum(fits[j]["score"] for j in joints) / max(len(joints), 1)
+    return bool(unexplained_reasons(
+        angle_fits={j: fits[j]["angle"] for j in joints}, score=score, ceiling=ceiling, residual_fails=residual_fails,
+        channel_fits={j: {c: v for c, v in fits[j].items() if c != "score"} for j in joints},
+        channel_ceilings=channel_ceilings))
 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,

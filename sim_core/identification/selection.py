@@ -39,8 +39,8 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, exchange, forward, judge, member_evaluations, pairs_after_a_drop, restart,
-                       simpler_parameters, stand_in)
+                       backward as _backward, exchange, forward, judge, member_evaluations, misses_record,
+                       pairs_after_a_drop, restart, simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, declared, free_parameter
 from .progress import RoundProgress
@@ -405,8 +405,10 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     try:
         to_start = snapshot()
         fw = run()
-        fw = restart(fw, rerun=lambda ev: run((fw.rounds[0], ev)), score=base.score, ceiling=ceiling,
-                     misfit=model_misfit, to_start=to_start, checkpoint=snapshot, log=log)
+        fw = restart(fw, rerun=lambda ev: run((fw.rounds[0], ev)), score=base.score,
+                     misses=None if misfit is None else (lambda m: misses_record(
+                         st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m))),
+                     to_start=to_start, checkpoint=snapshot, log=log)
     finally:
         side.close()
     model, accepted = fw.model, fw.accepted
