@@ -26,7 +26,7 @@ Causes and the effect that must be named (right: named alone, parameter within 1
 
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
         [--causes clean,overlap,...] [--rigs hanging,vertical,boom] [--jobs 2] [--control-every 1]
-        [--json FILE]
+        [--duration 60] [--rate 50] [--kp GAIN] [--json FILE]
 
 About 10 s per case on this 2-core VM (22 cases per seed with the defaults, two at a time).
 """
@@ -100,7 +100,8 @@ def _draw_one(cause: str, rng, seed: int):
     return {}, None
 
 
-def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1) -> dict:
+def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1, duration: float = 60.0,
+             rate: float = 50.0, kp: float | None = None) -> dict:
     bench = BENCHES[rig_name]
     draws = DRAWS[bench.template]
     rng = np.random.default_rng([seed, *[CAUSES.index(c) for c in cause.split("+")], list(BENCHES).index(rig_name)])
@@ -115,8 +116,11 @@ def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: in
     cli("rig", "new", bench.template, "--out", rig, *[a for kv in bench.rig_set for a in ("--set", kv)])
     if "seal_measured" in cause.split("+"):
         measured(rig, {"supply.pressure": off["supply"], f"effects.payload.{j}.mass": off["load_mass"]})
-    rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed,
-                           **{**bench.loop, "q0": rng.uniform(*draws["start"])}, control_every=control_every)
+    loop = {**bench.loop, "q0": rng.uniform(*draws["start"])}
+    if kp is not None:
+        loop["kp"] = kp
+    rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed, duration=duration, rate=rate,
+                           **loop, control_every=control_every)
     write_headerless(rows, work / "log.csv")
     d, seconds = diagnose_log(work, rig, j)
     named = [s["effect"] for s in d["selected"]]
@@ -141,9 +145,9 @@ def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: in
 
 
 def _case(args):
-    work, cause, rig_name, seed, control_every = args
+    work, cause, rig_name, seed, loop = args
     try:
-        return run_case(work, cause, rig_name, seed, control_every)
+        return run_case(work, cause, rig_name, seed, **loop)
     except Exception as exc:  # a case that fails is a finding, not the end of the run
         return {"cause": cause, "rig": rig_name, "seed": seed, "right": False, "failed": str(exc)}
 
@@ -157,6 +161,10 @@ def main():
     ap.add_argument("--jobs", type=int, default=2, help="cases run at once")
     ap.add_argument("--control-every", type=int, default=1, metavar="M",
                     help="the rig's controller runs at M x the log's 50 Hz and every M-th sample is logged")
+    ap.add_argument("--duration", type=float, default=60.0, help="s of each log")
+    ap.add_argument("--rate", type=float, default=50.0, help="Hz: the log's (and the controller's) rate")
+    ap.add_argument("--kp", type=float, help="the P controller's gain (V/m or V/rad; default: the rig's, "
+                                             "100 on the cylinder, 45 on the boom)")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
@@ -164,7 +172,8 @@ def main():
     if bad:
         ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; rigs: {', '.join(BENCHES)}")
     tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
-    jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, args.control_every) for s in range(args.first_seed, args.first_seed + args.seeds)
+    loop = {"control_every": args.control_every, "duration": args.duration, "rate": args.rate, "kp": args.kp}
+    jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, loop) for s in range(args.first_seed, args.first_seed + args.seeds)
             for r in args.rigs.split(",") for c in causes
             if not (BENCHES[r].template != "cylinder" and set(c.split("+")) & set(SLIDE_ONLY))]
     t0 = time.perf_counter()
@@ -185,7 +194,7 @@ def main():
                   f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     wall = time.perf_counter() - t0
     if args.control_every > 1:
-        print(f"\nthe rig's controller at {50 * args.control_every} Hz, every {args.control_every}th sample logged", end="")
+        print(f"\nthe rig's controller at {args.rate * args.control_every:g} Hz, every {args.control_every}th sample logged", end="")
     print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "
           "without the supply and the load measured: nothing else named)")
     for cause in causes:
