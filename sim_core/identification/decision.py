@@ -45,6 +45,8 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
+import numpy as np
+
 from .candidates import Candidate, decider
 
 THRESHOLD_POINTS = 2.0      # smallest validation gain that counts (research note: 2 points)
@@ -178,6 +180,11 @@ def best_passing(evals: list[Evaluation]) -> Evaluation | None:
     return max(ok, key=lambda e: e.gain) if ok else None
 
 
+def mean_score(fits: dict[str, dict[str, float]]) -> float:
+    """A model's validation score: the mean over joints of their decision scores."""
+    return float(np.mean([f["score"] for f in fits.values()]))
+
+
 def near_ceiling(score: float, ceiling: float) -> bool:
     """Within the threshold of the noise ceiling nothing more can be shown: stop searching."""
     return ceiling - score < THRESHOLD_POINTS
@@ -268,11 +275,10 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         have = [(e.candidate, e.effect_params()) for e in accepted]
         if r == 1 and first is not None:
             evals, best = first
-            rounds.append(evals)
         else:
             evals = evaluate_round(pool, model, have, r)
-            rounds.append(evals)
             best = best_passing(evals)
+        rounds.append(evals)
         if best is None:
             stopped = "no candidate passed" if r == 1 else "no further candidate passed"
             if (evaluate_pairs is None or len(accepted) + 2 > max_effects or near_ceiling(score(model), ceiling)
@@ -365,9 +371,9 @@ def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_cei
     angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
     while the residual tests fail)."""
     joints = list(fits)
-    score = sum(fits[j]["score"] for j in joints) / max(len(joints), 1)
     return bool(unexplained_reasons(
-        angle_fits={j: fits[j]["angle"] for j in joints}, score=score, ceiling=ceiling, residual_fails=residual_fails,
+        angle_fits={j: fits[j]["angle"] for j in joints}, score=mean_score(fits), ceiling=ceiling,
+        residual_fails=residual_fails,
         channel_fits={j: {c: v for c, v in fits[j].items() if c != "score"} for j in joints},
         channel_ceilings=channel_ceilings))
 

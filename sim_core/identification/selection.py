@@ -39,7 +39,7 @@ import numpy as np
 from . import output_error as oe
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
-                       backward as _backward, exchange, forward, judge, member_evaluations, misses_record,
+                       backward as _backward, exchange, forward, judge, mean_score, member_evaluations, misses_record,
                        pairs_after_a_drop, restart, simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, declared, free_parameter
@@ -404,8 +404,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 
     try:
         to_start = snapshot()
-        fw = run()
-        fw = restart(fw, rerun=lambda ev: run((fw.rounds[0], ev)), score=base.score,
+        greedy = run()
+        fw = restart(greedy, rerun=lambda ev: run((greedy.rounds[0], ev)), score=base.score,
                      misses=None if misfit is None else (lambda m: misses_record(
                          st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m))),
                      to_start=to_start, checkpoint=snapshot, log=log)
@@ -549,11 +549,6 @@ def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: 
         return model, None
     before, after = base.score(model), base.score(res.spec)
     return (res.spec, (before, after)) if after > before else (model, None)
-
-
-def mean_score(fits: dict[str, dict[str, float]]) -> float:
-    """A model's validation score: the mean over joints of their decision scores."""
-    return float(np.mean([f["score"] for f in fits.values()]))
 
 
 class _Baseline:
