@@ -26,7 +26,7 @@ Causes and the effect that must be named (right: named alone, parameter within 1
 
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
         [--causes clean,overlap,...] [--rigs hanging,vertical,boom] [--jobs 2] [--control-every 1]
-        [--duration 60] [--rate 50] [--kp GAIN] [--json FILE]
+        [--duration 60] [--rate 50] [--kp GAIN] [--ki GAIN] [--reference steps|ramps|sine] [--json FILE]
 
 About 10 s per case on this 2-core VM (22 cases per seed with the defaults, two at a time).
 """
@@ -101,7 +101,7 @@ def _draw_one(cause: str, rng, seed: int):
 
 
 def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1, duration: float = 60.0,
-             rate: float = 50.0, kp: float | None = None) -> dict:
+             rate: float = 50.0, kp: float | None = None, ki: float = 0.0, reference: str = "steps") -> dict:
     bench = BENCHES[rig_name]
     draws = DRAWS[bench.template]
     rng = np.random.default_rng([seed, *[CAUSES.index(c) for c in cause.split("+")], list(BENCHES).index(rig_name)])
@@ -119,6 +119,7 @@ def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: in
     loop = {**bench.loop, "q0": rng.uniform(*draws["start"])}
     if kp is not None:
         loop["kp"] = kp
+    loop.update(ki=ki, reference=reference)
     rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed, duration=duration, rate=rate,
                            **loop, control_every=control_every)
     write_headerless(rows, work / "log.csv")
@@ -165,6 +166,10 @@ def main():
     ap.add_argument("--rate", type=float, default=50.0, help="Hz: the log's (and the controller's) rate")
     ap.add_argument("--kp", type=float, help="the P controller's gain (V/m or V/rad; default: the rig's, "
                                              "100 on the cylinder, 45 on the boom)")
+    ap.add_argument("--ki", type=float, default=0.0, help="the controller's integral gain (V/(m s) or V/(rad s)): "
+                                                          "a PI loop, whose holds end with no error")
+    ap.add_argument("--reference", choices=("steps", "ramps", "sine"), default="steps",
+                    help="the set-point: steps, an operator's ramps and holds, or two sines (tracking)")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
@@ -172,7 +177,8 @@ def main():
     if bad:
         ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; rigs: {', '.join(BENCHES)}")
     tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
-    loop = {"control_every": args.control_every, "duration": args.duration, "rate": args.rate, "kp": args.kp}
+    loop = {"control_every": args.control_every, "duration": args.duration, "rate": args.rate, "kp": args.kp,
+            "ki": args.ki, "reference": args.reference}
     jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, loop) for s in range(args.first_seed, args.first_seed + args.seeds)
             for r in args.rigs.split(",") for c in causes
             if not (BENCHES[r].template != "cylinder" and set(c.split("+")) & set(SLIDE_ONLY))]
@@ -193,6 +199,8 @@ def main():
             print(f"{head} {'RIGHT' if c['right'] else 'wrong'}  truth {truth}; {c['verdict']}: {named}{err}; "
                   f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     wall = time.perf_counter() - t0
+    if args.reference != "steps" or args.ki:
+        print(f"\nset-point {args.reference}, {'PI' if args.ki else 'P'} control", end="")
     if args.control_every > 1:
         print(f"\nthe rig's controller at {args.rate * args.control_every:g} Hz, every {args.control_every}th sample logged", end="")
     print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "

@@ -148,17 +148,48 @@ def rhs(rig: Rig, u: float):
     return f
 
 
-def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float = 50.0, q0: float = 0.23,
-                    kp: float = 100.0, jitter: float = 0.1, references=(0.12, 0.38), control_every: int = 1) -> np.ndarray:
-    """A P controller (kp in V/m or V/rad, command clipped to +-10 V) tracking set-point steps held 1.5-4 s within
-    ``references`` (m or rad), run at ``control_every`` x ``rate``; returns the logged rows (time s, sensor V,
-    command V), every ``control_every``-th of the controller's (a logger slower than the loop)."""
-    rng = np.random.default_rng(seed)
-    steps_t, steps_r, t = [], [], 0.0
+def reference_profile(kind: str, rng, duration: float, references=(0.12, 0.38)):
+    """The set-point (m or rad) as a function of time (s), within ``references``: ``steps`` held 1.5-4 s,
+    ``ramps`` (an operator's moves: to a new target at 0.2-1 x the range per second, then held 0.5-3 s),
+    or ``sine`` (two sines of 0.05-0.4 Hz about the range's middle, a tracking test)."""
+    lo, hi = references
+    if kind == "steps":
+        starts, values, t = [], [], 0.0
+        while t < duration:
+            starts.append(t)
+            values.append(rng.uniform(lo, hi))
+            t += rng.uniform(1.5, 4.0)
+        return lambda t: values[int(np.searchsorted(starts, t, side="right")) - 1]
+    if kind == "sine":
+        f = rng.uniform(0.05, 0.4, 2)
+        ph = rng.uniform(0.0, 2 * math.pi, 2)
+        mid, amp = 0.5 * (lo + hi), 0.25 * (hi - lo)
+        return lambda t: mid + amp * (math.sin(2 * math.pi * f[0] * t + ph[0]) + math.sin(2 * math.pi * f[1] * t + ph[1]))
+    if kind != "ramps":
+        raise ValueError(f"reference {kind!r}: steps, ramps or sine")
+    knots_t, knots_r, t = [0.0], [rng.uniform(lo, hi)], 0.0
     while t < duration:
-        steps_t.append(t)
-        steps_r.append(rng.uniform(*references))
-        t += rng.uniform(1.5, 4.0)
+        t += rng.uniform(0.5, 3.0)                              # the hold
+        knots_t.append(t)
+        knots_r.append(knots_r[-1])
+        r = rng.uniform(lo, hi)
+        t += abs(r - knots_r[-1]) / (rng.uniform(0.2, 1.0) * (hi - lo))
+        knots_t.append(t)
+        knots_r.append(r)
+    return lambda t: float(np.interp(t, knots_t, knots_r))
+
+
+def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float = 50.0, q0: float = 0.23,
+                    kp: float = 100.0, ki: float = 0.0, jitter: float = 0.1, references=(0.12, 0.38),
+                    reference: str = "steps", control_every: int = 1) -> np.ndarray:
+    """A P or PI controller (kp in V/m or V/rad, ki in V/(m s) or V/(rad s); command clipped to +-10 V, the
+    integral held while the command saturates in its direction) tracking a ``reference`` profile within
+    ``references`` (m or rad; `reference_profile`), run at ``control_every`` x ``rate``; returns the logged
+    rows (time s, sensor V, command V), every ``control_every``-th of the controller's (a logger slower
+    than the loop)."""
+    rng = np.random.default_rng(seed)
+    setpoint = reference_profile(reference, rng, duration, references)
+    integral = 0.0
     aa = math.pi / 4 * rig.bore ** 2
     ab = aa - math.pi / 4 * rig.rod ** 2
     piston, _, gravity = mechanics(rig)
@@ -170,10 +201,13 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
     while t < duration:
         volts = (y[0] - rig.sensor_b) / rig.sensor_a + rng.normal(0.0, rig.sensor_noise)
         volts = float(np.clip(np.round(volts / lsb) * lsb, 0.0, 10.0))
-        ref = steps_r[int(np.searchsorted(steps_t, t, side="right")) - 1]
-        u = float(np.clip(kp * (ref - (rig.sensor_a * volts + rig.sensor_b)), -10.0, 10.0))
+        error = setpoint(t) - (rig.sensor_a * volts + rig.sensor_b)
+        raw = kp * error + ki * integral
+        u = float(np.clip(raw, -10.0, 10.0))
         rows.append((t, volts, round(u, 3)))
         dt = (1.0 + rng.uniform(-jitter, jitter)) / (rate * control_every)
+        if raw == u or (raw > u) != (error > 0):               # anti-windup: no integrating into the clip
+            integral += error * dt
         # the valve sees each command from its time + command_delay on: split the interval where one
         # delayed command gives way to the next
         recent = rows[-64 * control_every:]
