@@ -26,7 +26,8 @@ Causes and the effect that must be named (right: named alone, parameter within 1
 
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
         [--causes clean,overlap,...] [--rigs hanging,vertical,boom] [--jobs 2] [--control-every 1]
-        [--duration 60] [--rate 50] [--kp GAIN] [--ki GAIN] [--reference steps|ramps|sine] [--json FILE]
+        [--duration 60] [--rate 50] [--kp GAIN] [--ki GAIN] [--reference steps|ramps|sine]
+        [--references LO,HI] [--start Q0] [--json FILE]
 
 About 10 s per case on this 2-core VM (22 cases per seed with the defaults, two at a time).
 """
@@ -101,7 +102,8 @@ def _draw_one(cause: str, rng, seed: int):
 
 
 def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1, duration: float = 60.0,
-             rate: float = 50.0, kp: float | None = None, ki: float = 0.0, reference: str = "steps") -> dict:
+             rate: float = 50.0, kp: float | None = None, ki: float = 0.0, reference: str = "steps",
+             references: tuple | None = None, start: float | None = None) -> dict:
     bench = BENCHES[rig_name]
     draws = DRAWS[bench.template]
     rng = np.random.default_rng([seed, *[CAUSES.index(c) for c in cause.split("+")], list(BENCHES).index(rig_name)])
@@ -117,9 +119,13 @@ def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: in
     if "seal_measured" in cause.split("+"):
         measured(rig, {"supply.pressure": off["supply"], f"effects.payload.{j}.mass": off["load_mass"]})
     loop = {**bench.loop, "q0": rng.uniform(*draws["start"])}
+    if start is not None:
+        loop["q0"] = start
     if kp is not None:
         loop["kp"] = kp
     loop.update(ki=ki, reference=reference)
+    if references is not None:
+        loop["references"] = references
     rows = closed_loop_log(Rig(**{**bench.nominal, **off, **physical}), seed=seed, duration=duration, rate=rate,
                            **loop, control_every=control_every)
     write_headerless(rows, work / "log.csv")
@@ -170,6 +176,11 @@ def main():
                                                           "a PI loop, whose holds end with no error")
     ap.add_argument("--reference", choices=("steps", "ramps", "sine"), default="steps",
                     help="the set-point: steps, an operator's ramps and holds, or two sines (tracking)")
+    ap.add_argument("--references", metavar="LO,HI", help="the set-points' range (m or rad; default the rig's: "
+                    "0.12,0.38 on the cylinder, 0.02,0.68 on the boom); beyond the stroke (0 to 0.5 m, -0.2 to 0.9 "
+                    "rad) the loop drives the rig into its end stop and holds it there")
+    ap.add_argument("--start", type=float, help="where the rig starts (m or rad) in place of the drawn start; "
+                    "0 (-0.2 on the boom) rests it on its lower end stop")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
@@ -178,7 +189,9 @@ def main():
         ap.error(f"unknown {', '.join(sorted(bad))}; causes: {', '.join(CAUSES)}; rigs: {', '.join(BENCHES)}")
     tmp = Path(tempfile.mkdtemp(prefix="bench_textbook_"))
     loop = {"control_every": args.control_every, "duration": args.duration, "rate": args.rate, "kp": args.kp,
-            "ki": args.ki, "reference": args.reference}
+            "ki": args.ki, "reference": args.reference,
+            "references": tuple(float(v) for v in args.references.split(",")) if args.references else None,
+            "start": args.start}
     jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, loop) for s in range(args.first_seed, args.first_seed + args.seeds)
             for r in args.rigs.split(",") for c in causes
             if not (BENCHES[r].template != "cylinder" and set(c.split("+")) & set(SLIDE_ONLY))]
@@ -199,8 +212,9 @@ def main():
             print(f"{head} {'RIGHT' if c['right'] else 'wrong'}  truth {truth}; {c['verdict']}: {named}{err}; "
                   f"fit {c['fit_before']:.1f}{after} %; {c['seconds']:.0f} s", flush=True)
     wall = time.perf_counter() - t0
-    if args.reference != "steps" or args.ki:
-        print(f"\nset-point {args.reference}, {'PI' if args.ki else 'P'} control", end="")
+    if args.reference != "steps" or args.ki or args.references or args.start is not None:
+        print(f"\nset-point {args.reference}{f' in {args.references}' if args.references else ''}, "
+              f"{'PI' if args.ki else 'P'} control{'' if args.start is None else f', start {args.start:g}'}", end="")
     if args.control_every > 1:
         print(f"\nthe rig's controller at {args.rate * args.control_every:g} Hz, every {args.control_every}th sample logged", end="")
     print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "

@@ -217,6 +217,26 @@ def test_start_pose_is_the_records_first_reading():
     assert start_position(spec, rec, "j2") == -0.3
 
 
+def test_a_record_that_starts_on_an_end_stop_starts_there():
+    """A rig resting on its end stop when the log starts (the joint at its lower limit) is simulated
+    from the limit itself, without a note that it is outside its range (before: from 0.01 rad inside,
+    which on a slide is a centimetre of motion that never happened, and a clean record came out
+    unexplained_discrepancy); a reading beyond the limit starts at the limit, with the note."""
+    spec = load_robot("hydrolek")
+    i = spec.tree.index(spec.joint("j2").dof)
+    lo = float(spec.tree.lower[i])
+    ds = simulated(spec, duration=3.0, rest=1.0)
+    k = ds.columns.index("q_j2")
+    for shift, outside in ((0.0, False), (-0.02, True)):
+        data = ds.data.copy()
+        data[:, k] += lo + shift - data[0, k]
+        rec = record_from_dataset(Dataset(list(ds.columns), data), spec, source="r")
+        q0, se = first_reading(rec.time, data[:, k])
+        assert rec.initial_pose["j2"] == (lo if outside else max(q0, lo))
+        assert abs(rec.initial_pose["j2"] - lo) < 3 * se + 1e-4
+        assert any("outside the joint's range" in n for n in rec.notes) == outside
+
+
 def test_start_position_inverts_the_models_sensor():
     """A model whose sensor reads y = g q + c starts where it reads the record's first reading."""
     spec = load_robot("hydrolek")

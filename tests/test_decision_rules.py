@@ -850,3 +850,14 @@ def test_worst_channel_and_failing_residual_tests():
     assert residual_fails(white | {"ljung_box_p": 1e-5})
     assert residual_fails(white | {"independence": {"u": {"exceeds": False}, "|u|": {"exceeds": True}}})
     assert not residual_fails({})
+
+
+def test_a_recalibration_that_scores_more_than_the_threshold_lower_on_the_validation_data_is_not_kept():
+    """Redone with a newly named effect, the calibration is fitted on the estimation data; the
+    validation data judges it. Kept when it scores higher, the same or less than the acceptance
+    threshold lower; not kept beyond (the rule deleted: always kept; inverted: never)."""
+    assert dc.recalibration_kept(96.8, 98.9)
+    assert dc.recalibration_kept(96.8, 96.8)
+    assert dc.recalibration_kept(96.8, 96.8 - dc.THRESHOLD_POINTS + 0.01)
+    assert not dc.recalibration_kept(96.8, 96.8 - dc.THRESHOLD_POINTS - 0.01)
+    assert not dc.recalibration_kept(96.8, 87.1)

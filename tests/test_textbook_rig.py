@@ -132,6 +132,34 @@ def test_diagnose_says_what_the_textbook_rig_has_that_the_template_has_not(cli, 
         assert named["params"][param] == pytest.approx(truth, rel=0.15 if effect == "leakage" or len(expect) > 1 else 0.10)
 
 
+def test_a_recalibration_the_end_stop_disproves_gives_way_to_one_with_a_parameter_held(cli, tmp_path):
+    """The hanging load lifted into its end stop: set-points down to 4 cm beyond the stroke's end, the
+    stop first touched in the validation data. Once the overlap is named as a deadband, the
+    calibration redone on the estimation data identifies a sensor offset of about 3 cm (it fits
+    millimetres of misfit with where the chambers' volumes sit), which puts the model's end stop
+    3 cm off: the validation score falls from 94 to 89 (kept as it was, the benchmark's record of this
+    kind came out unexplained_discrepancy; not kept at all, this one named an area ratio beside the
+    deadband: the load, the supply and the seal friction stay at the spec's). The recalibration is
+    redone with each newly identified parameter held in turn, and the best that keeps the score is
+    kept: the deadband alone, within 10 %."""
+    bench = BENCHES["hanging"]
+    rig = _rig_dir(cli, tmp_path / "rig", bench)
+    rows = closed_loop_log(_textbook(bench, True, overlap=0.12), seed=1, **{**bench.loop, "references": (-0.04, 0.36)})
+    assert rows[:, 1].min() == 0.0                       # the premise: the sensor reads the stop (0 V)
+    write_headerless(rows, tmp_path / "log.csv")
+    cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header", "--column",
+        "time=0", "--column", "q_lift=1:sensor_volts", "--column", "u_lift=2", check=True)
+    proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    redone = d["calibration"]["recalibrations"][0]
+    assert redone["freed_validation_score"] < redone["validation_score"][0] - 2.0, redone    # the premise
+    assert redone["held"] == "effects.sensor_offset.lift.offset"
+    assert redone["validation_score"][1] > redone["validation_score"][0]
+    assert [s["effect"] for s in d["selected"]] == ["deadband"], (d["verdict"], d["selected"])
+    assert d["selected"][0]["params"]["width"] == pytest.approx(0.12 / SPOOL_GAIN_PER_VOLT, rel=0.10)
+
+
 @pytest.mark.parametrize("rig_name,seed", [("hanging", 2), ("vertical", 3)])
 def test_a_measured_rigs_seal_friction_is_named_or_listed_as_close(cli, tmp_path, rig_name, seed):
     """Coulomb friction with the supply and the load measured (written in, [estimated] lines deleted):

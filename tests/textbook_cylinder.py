@@ -76,6 +76,8 @@ class Rig:
     piston_leakage: float = 0.0         # m^3/(s Pa); laminar leakage across the piston, A to B
     command_delay: float = 0.0          # s; dead time between the controller's output and the amplifier
     laminar_below: float = 1.0e5        # Pa
+    stop_stiffness: float = 2.0e7       # N/m; the piston's end stops at 0 and the full stroke (a full
+                                        # bore force pushes about 1.4 mm in), damped at 0.7 of critical
     amp_gain: float = 0.08              # A/V
     max_current: float = 0.8            # A
     coil_tau: float = 0.008             # s
@@ -143,6 +145,11 @@ def rhs(rig: Rig, u: float):
         ca = (rig.dead_a + aa * xp) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
         cb = (rig.dead_b + ab * (full - xp)) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
         force = pa * aa - pb * ab - rig.viscous * vp - rig.coulomb * math.tanh(vp / 1e-3)
+        if xp < 0.0 or xp > full:         # in an end stop: a unilateral spring-damper, pushing out only
+            depth, speed = (-xp, -vp) if xp < 0.0 else (xp - full, vp)
+            damping = 1.4 * math.sqrt(rig.stop_stiffness * inertia / arm ** 2)
+            push = max(rig.stop_stiffness * depth + damping * speed, 0.0)
+            force += push if xp < 0.0 else -push
         return [v, (force * arm + gravity(q)) / inertia, (qa - aa * vp) / ca, (qb + ab * vp) / cb,
                 (i_ref - i) / rig.coil_tau, xd, w * w * (rig.spool_gain * i - x) - 2 * rig.spool_zeta * w * xd]
     return f

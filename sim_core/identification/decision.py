@@ -10,6 +10,9 @@ The rules, in the order they apply:
 * acceptance (:func:`judge`): gain >= max(2 points, 3 x the noise spread of the gain); BIC improves;
   no parameter on a search bound other than the one where the effect vanishes; at least one
   parameter more than 3 sigma from "no effect";
+* recalibration (:func:`recalibration_kept`): once an effect is named, the calibration is redone
+  with it on the estimation data; the redone one is kept unless it scores more than 2 points lower
+  on the validation data (it fitted what the estimation window alone shows);
 * forward selection (:func:`forward`): each round every remaining candidate is refitted with what
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
   when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
@@ -178,6 +181,15 @@ def best_passing(evals: list[Evaluation]) -> Evaluation | None:
     """The candidate that joins the model: the largest gain among those that pass."""
     ok = [e for e in evals if e.accepted_ok]
     return max(ok, key=lambda e: e.gain) if ok else None
+
+
+def recalibration_kept(before: float, after: float) -> bool:
+    """Whether a calibration redone with a newly named effect replaces the model as it was: the
+    validation scores of the model before and after. Both were fitted on the estimation data; a redone
+    calibration that frees more parameters can fit that window better and predict the rest worse (a
+    sensor offset fitted to millimetres of structural misfit puts the end stop centimetres off, which
+    only a later end-stop contact shows). More than the acceptance threshold lost: not kept."""
+    return after >= before - THRESHOLD_POINTS
 
 
 def mean_score(fits: dict[str, dict[str, float]]) -> float:

@@ -31,7 +31,8 @@ from . import blind_spots, command_null, conditional, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
-from .decision import FAR_POINTS, SIGNIFICANCE, final_check, residual_explained_pct, rivalry, unexplained_reasons, verdict
+from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, recalibration_kept, residual_explained_pct, rivalry,
+                       unexplained_reasons, verdict)
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter, free_parameter
 from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
@@ -251,7 +252,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     uncalibrated = {c["parameter"]: c["nominal"] for c in cal.changes}
     recalibrations: list[dict] = []
 
-    def recalibrate(model, ev):
+    def recalibrate(model, ev, score=None):
         if not pending:
             return model
         # started where the baseline ended; a parameter this calibration cannot identify goes back to
@@ -259,10 +260,35 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # model (a 0.3 rad sensor offset for a valve offset)
         again = calibrate(model, fast, est, free=pl.free, why=pl.why, nominal=uncalibrated)
         newly = [k for k in again.identified if k in pending]
-        recalibrations.append({"after": ev.candidate.label, "identified": again.identified, "newly_identified": newly,
-                               "changes": again.changes})
+        entry = {"after": ev.candidate.label, "identified": again.identified, "newly_identified": newly,
+                 "changes": again.changes}
+        recalibrations.append(entry)
         if not newly:
             return model
+        if score is not None:
+            before, after = score(model), score(again.spec)
+            entry["validation_score"] = [round(before, 3), round(after, 3)]
+            if not recalibration_kept(before, after):
+                # which newly identified parameter the validation data disagrees with: redone with each
+                # in turn held where it is, the best of those that keep the score
+                tries = []
+                for k in newly:
+                    held = calibrate(model, fast, est, free=[fp for fp in pl.free if fp.key != k], why=pl.why,
+                                     nominal=uncalibrated)
+                    tries.append((score(held.spec), k, held))
+                kept = [t for t in tries if recalibration_kept(before, t[0]) and any(i in pending for i in t[2].identified)]
+                if not kept:
+                    entry["kept"] = False
+                    log(f"recalibration with {ev.candidate.label}: not kept (validation score {before:.2f} -> "
+                        f"{after:.2f}, as low with any one parameter held); {', '.join(newly)} stay as they were")
+                    return model
+                after_held, k, again = max(kept, key=lambda t: t[0])
+                newly = [i for i in again.identified if i in pending]
+                entry.update(identified=again.identified, newly_identified=newly, changes=again.changes, held=k,
+                             validation_score=[round(before, 3), round(after_held, 3)],
+                             freed_validation_score=round(after, 3))
+                log(f"recalibration with {ev.candidate.label}: {k} held (validation score {before:.2f} -> "
+                    f"{after:.2f} with it freed, {after_held:.2f} held)")
         log(f"recalibration with {ev.candidate.label}: {', '.join(newly)} now identified")
         keys[:] = refit_keys(again.identified)
         for k in newly:

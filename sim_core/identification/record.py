@@ -197,13 +197,16 @@ def _initial_pose(spec, angles, t, policy: str, notes: list[str]) -> dict[str, f
         q_meas, se = first_reading(t, angles[j])
         i = tree.index(spec.joint(j).dof)
         lo, hi = float(tree.lower[i]), float(tree.upper[i])
-        inside = min(max(q_meas, lo + END_STOP_MARGIN), hi - END_STOP_MARGIN) if lo < hi else q_meas
+        # a rig at rest on its end stop starts there (the stop itself, not a margin inside it: on a slide a
+        # centimetre is a motion of its own); a reading beyond the stop is clamped to it, and said when it
+        # lies further beyond than a stop's contact and the noise explain
+        inside = min(max(q_meas, lo), hi) if lo < hi else q_meas
         unit = column_unit(f"q_{j}", spec)
-        if inside != q_meas:
+        if abs(inside - q_meas) > END_STOP_MARGIN:
             notes.append(f"{j}: the record starts at {q_meas:.3f} {unit}, outside the joint's range [{lo:.3f}, {hi:.3f}] "
                          f"{unit} (check the units, {unit}, and the sensor calibration); the simulation starts at "
                          f"{inside:.3f}")
-            q_meas = inside
+        q_meas = inside
         pose[j] = q_meas
         if abs(q_meas - q_spec) > 1e-3:
             notes.append(f"{j}: the record starts at {q_meas:.4f} {unit} (+-{se:.1e} from its first readings), "

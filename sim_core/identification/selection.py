@@ -28,6 +28,7 @@ score a candidate, score a model, refit without an effect).
 from __future__ import annotations
 
 import math
+from functools import partial
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -352,8 +353,9 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
     (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
     of candidate fits, pair fits, the validation score, a refit without one effect.
-    ``recalibrate(model, ev)``: the model once ``ev``'s effect is in it, its calibration redone (it may
-    change ``st.calib_keys`` in place); None: the model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
+    ``recalibrate(model, ev, score)``: the model once ``ev``'s effect is in it, its calibration redone (it may
+    change ``st.calib_keys`` in place; ``score(model)`` is the validation score, to judge the redone one
+    by); None: the model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
     condition for the pair search); None: no pair search. ``stand_ins``: effect name -> the held
     nominal parameters it must beat (calibration.Plan.stand_ins; decision.stand_in), freed in its place
     after the other passes; one that takes the place joins ``st.calib_keys``. ``checkpoint()``: a
@@ -363,6 +365,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     ceilings = channel_ceilings(st, st.val.joints)
     ceiling = score_ceiling(ceilings)
     base = _Baseline(st)
+    if recalibrate is not None:
+        recalibrate = partial(recalibrate, score=base.score)
 
     def evaluate_round(pool, model, accepted, r):
         base_out, base_cost = base.outputs(model), base.cost(model)
