@@ -28,12 +28,12 @@ score a candidate, score a model, refit without an effect).
 from __future__ import annotations
 
 import math
-from functools import partial
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
