@@ -57,6 +57,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,7 @@ RANGES = {
     "hysteresis": ("width", 0.3, 1.0, "", False, False),                # V
     "bulk_modulus": ("scale", 0.3, 0.65, "", True, False),
     "valve_offset": ("offset", 0.05, 0.5, "", True, True),             # V, either side of the null
+    "pump_limit": ("max_flow", 0.35, 0.75, "q_full", False, False),     # x the joint's full valve flow
 }
 # pairs beyond the CONFUSIONS catalog: (effect, effect[, robot, joint])
 OTHER_PAIRS = [("deadband", "coulomb_friction", "harvester", "boom"), ("deadband", "delay"), ("deadband", "leakage"),
@@ -339,11 +341,17 @@ ROBOTS = ("hydrolek", "rig")
 
 
 def build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
-    """The selected cases, each drawn as in the whole matrix: a single's magnitude and noise come from
-    its position in the full list, so ``--groups``/``--robots`` select cases without changing them
-    (``--robots`` selects the singles and clean records; pairs and out-of-bank cases name their own)."""
+    """The selected cases, each drawn as in the whole matrix: a case's magnitude and noise come from its
+    name (:func:`case_rng`), so ``--groups``/``--robots`` select cases without changing them, and an
+    effect added to the bank adds its own cases without changing the others' (``--robots`` selects
+    the singles and clean records; pairs and out-of-bank cases name their own)."""
     return [c for c in _build(seeds, set(GROUPS), set(ROBOTS))
             if c["group"] in groups and (c["group"] in ("pairs", "out_of_bank") or c["robot"] in robots)]
+
+
+def case_key(case_id: str) -> int:
+    """A number of the case's name: its draws and seeds follow from it, not from its place in the list."""
+    return zlib.crc32(case_id.encode()) % 100_000
 
 
 def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
@@ -352,7 +360,7 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
         if "hydrolek" in robots:
             spec = load_robot("hydrolek")
             for (effect, j), k in itertools.product(offered(spec, JOINT), range(seeds)):
-                rng = np.random.default_rng(1000 + 17 * k + len(cases))
+                rng = np.random.default_rng([1000 + k, case_key(f"single/hydrolek/{effect}/{k + 1}")])
                 cases.append({"id": f"single/hydrolek/{effect}/{k + 1}", "group": "singles", "robot": "hydrolek",
                               "joint": JOINT, "seed": 100 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3],
                               "noise": float(rng.uniform(2e-4, 1e-3)),
@@ -365,20 +373,21 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
             for (effect, j), k in itertools.product(offered(spec, joint), range(seeds)):
                 if j is None:       # the rig generator hides effects on its joint
                     continue
-                rng = np.random.default_rng(2000 + 17 * k + len(cases))
+                rng = np.random.default_rng([2000 + k, case_key(f"single/rig_boom/{effect}/{k + 1}")])
                 cases.append({"id": f"single/rig_boom/{effect}/{k + 1}", "group": "singles", "robot": "rig",
                               "template": "boom", "joint": joint, "seed": 200 + k,
                               "hidden": [(effect, j, magnitude(effect, spec, joint, k, seeds, rng))]})
             shutil.rmtree(tmp, ignore_errors=True)
     if "pairs" in groups:
         catalog = sorted({tuple(sorted((a, b))) for a, e in EFFECTS.items() for b in e.CONFUSIONS})
-        for n, pair in enumerate(catalog + OTHER_PAIRS):
+        for pair in catalog + OTHER_PAIRS:
             a, b, *where = pair
             robot, joint = where if where else ("hydrolek", JOINT)
             spec = load_robot(robot)
             if a not in RANGES or b not in RANGES:
                 continue
-            rng = np.random.default_rng(3000 + n)
+            key = case_key(f"pair/{robot}/{a}+{b}")
+            rng = np.random.default_rng([3000, key])
             hidden = []
             for e in (a, b):
                 j = None if EFFECTS[e].scope == "global" else joint
@@ -387,7 +396,7 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
                     params = {"width": 1.7}                       # its nominal deadband is 1.2 V
                 hidden.append((e, j, params))
             cases.append({"id": f"pair/{robot}/{a}+{b}", "group": "pairs", "robot": robot, "joint": joint,
-                          "seed": 300 + n, "excitation": "prbs", "noise": 4e-4, "hidden": hidden})
+                          "seed": 300 + key % 1000, "excitation": "prbs", "noise": 4e-4, "hidden": hidden})
     if "clean" in groups:
         for k in range(seeds):
             if "hydrolek" in robots:

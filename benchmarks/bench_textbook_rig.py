@@ -15,6 +15,8 @@ Causes and the effect that must be named (right: named alone, parameter within 1
   piston_leak     1.5e-12 - 8e-12 m^3/(s Pa)             -> leakage, internal
   bus_delay       20-100 ms                               -> delay
   null_bias       the spool 0.5-3 % of its stroke off centre -> valve_offset, offset = bias / (V -> stroke)
+  small_pump      a fixed pump of 0.3-0.7 x the valve's rated flow, its relief at the supply pressure
+                  (the supply falls while the valve asks for more) -> pump_limit, max_flow = the pump's flow
   slow_spool      the spool at 5-10 Hz, not the spec's 15 -> spool_lag; its truth is the extra
                   low-frequency lag of the slower second-order spool, 2 zeta (1/w - 1/w_spec)
   seal_friction   Coulomb 500-2500 N, supply and load unknown: right = nothing else named
@@ -27,7 +29,7 @@ Causes and the effect that must be named (right: named alone, parameter within 1
     .venv/bin/python benchmarks/bench_textbook_rig.py [--seeds 3] [--first-seed 1]
         [--causes clean,overlap,...] [--rigs hanging,vertical,boom] [--jobs 2] [--control-every 1]
         [--duration 60] [--rate 50] [--kp GAIN] [--ki GAIN] [--reference steps|ramps|sine]
-        [--references LO,HI] [--start Q0] [--json FILE]
+        [--references LO,HI] [--start Q0] [--flow-factor F] [--supply-factor F] [--json FILE]
 
 About 10 s per case on this 2-core VM (22 cases per seed with the defaults, two at a time).
 """
@@ -61,7 +63,7 @@ DRAWS = {"cylinder": {"load": (70.0, 150.0), "viscous": (1000.0, 5000.0), "start
 SLIDE_ONLY = ("seal_friction", "seal_measured")
 # (appended at the end: a cause's index seeds its draws, so those of the others stay as they were)
 CAUSES = ("clean", "overlap", "edges", "piston_leak", "bus_delay", "slow_spool", "seal_friction", "seal_measured",
-          "null_bias")
+          "null_bias", "small_pump")
 
 
 def draw(cause: str, rng, seed: int):
@@ -95,6 +97,9 @@ def _draw_one(cause: str, rng, seed: int):
         hz, spec = rng.uniform(5.0, 10.0), Rig()
         lag = 2 * spec.spool_zeta * (1 / (2 * math.pi * hz) - 1 / (2 * math.pi * spec.spool_hz))
         return {"spool_hz": hz}, ("spool_lag", "time_constant", lag)
+    if cause == "small_pump":
+        share = rng.uniform(0.3, 0.7)
+        return {"pump_share": share}, ("pump_limit", "max_flow", share)
     if cause in ("seal_friction", "seal_measured"):
         f = rng.uniform(500.0, 2500.0)
         return {"coulomb": f}, (("coulomb_friction", "torque", f) if cause == "seal_measured" else None)
@@ -103,14 +108,20 @@ def _draw_one(cause: str, rng, seed: int):
 
 def run_case(work: Path, cause: str, rig_name: str, seed: int, control_every: int = 1, duration: float = 60.0,
              rate: float = 50.0, kp: float | None = None, ki: float = 0.0, reference: str = "steps",
-             references: tuple | None = None, start: float | None = None) -> dict:
+             references: tuple | None = None, start: float | None = None, flow_factor: float = 1.0,
+             supply_factor: float = 1.0) -> dict:
     bench = BENCHES[rig_name]
     draws = DRAWS[bench.template]
     rng = np.random.default_rng([seed, *[CAUSES.index(c) for c in cause.split("+")], list(BENCHES).index(rig_name)])
     nominal = Rig(**bench.nominal)
     off = dict(rated_flow=nominal.rated_flow * rng.uniform(0.8, 1.3), supply=nominal.supply * rng.uniform(0.85, 1.1),
                load_mass=rng.uniform(*draws["load"]), viscous=rng.uniform(*draws["viscous"]))
+    off["rated_flow"] *= flow_factor           # a spec further off than the draws (applied after them)
+    off["supply"] *= supply_factor
     physical, expect = draw(cause, rng, seed)
+    if "pump_share" in physical:              # a pump that gives this share of the valve's rated flow
+        physical["pump_flow"] = physical.pop("pump_share") * off["rated_flow"]
+        expect = [(e, k, physical["pump_flow"] if e == "pump_limit" else v) for e, k, v in expect]
     work.mkdir(parents=True)
     rig = work / "rig"
 
@@ -181,6 +192,10 @@ def main():
                     "rad) the loop drives the rig into its end stop and holds it there")
     ap.add_argument("--start", type=float, help="where the rig starts (m or rad) in place of the drawn start; "
                     "0 (-0.2 on the boom) rests it on its lower end stop")
+    ap.add_argument("--flow-factor", type=float, default=1.0,
+                    help="the rig's valve flow x this on top of the drawn x0.8-1.3 (a spec further off)")
+    ap.add_argument("--supply-factor", type=float, default=1.0,
+                    help="the rig's supply pressure x this on top of the drawn x0.85-1.1")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     causes = args.causes.split(",")
@@ -191,7 +206,7 @@ def main():
     loop = {"control_every": args.control_every, "duration": args.duration, "rate": args.rate, "kp": args.kp,
             "ki": args.ki, "reference": args.reference,
             "references": tuple(float(v) for v in args.references.split(",")) if args.references else None,
-            "start": args.start}
+            "start": args.start, "flow_factor": args.flow_factor, "supply_factor": args.supply_factor}
     jobs = [(tmp / f"{c}_{r}_{s}", c, r, s, loop) for s in range(args.first_seed, args.first_seed + args.seeds)
             for r in args.rigs.split(",") for c in causes
             if not (BENCHES[r].template != "cylinder" and set(c.split("+")) & set(SLIDE_ONLY))]
@@ -215,6 +230,8 @@ def main():
     if args.reference != "steps" or args.ki or args.references or args.start is not None:
         print(f"\nset-point {args.reference}{f' in {args.references}' if args.references else ''}, "
               f"{'PI' if args.ki else 'P'} control{'' if args.start is None else f', start {args.start:g}'}", end="")
+    if args.flow_factor != 1.0 or args.supply_factor != 1.0:
+        print(f"\nthe rig's valve flow x{args.flow_factor:g} and supply x{args.supply_factor:g} beyond the drawn spread", end="")
     if args.control_every > 1:
         print(f"\nthe rig's controller at {args.rate * args.control_every:g} Hz, every {args.control_every}th sample logged", end="")
     print(f"\nright = named alone within {100 * TOLERANCE:.0f} % (clean: no_significant_discrepancy; seal_friction "

@@ -41,6 +41,7 @@ CASES = [
     Case("backlash", "hydrolek", "j2", [("backlash", "j2", {"width": (0.015, 0.03)})]),
     Case("area_ratio", "hydrolek", "j2", [("area_ratio", "j2", {"ratio": (0.55, 0.66)})]),
     Case("flow_saturation", "hydrolek", "j2", [("flow_saturation", "j2", {"max_flow": (2.0e-5, 2.8e-5)})]),
+    Case("pump_limit", "hydrolek", "j2", [("pump_limit", None, {"max_flow": (2.0e-5, 3.5e-5)})]),
     Case("sensor_offset", "hydrolek", "j2", [("sensor_offset", "j2", {"offset": (0.015, 0.035)})], sign={"offset": True},
          options=["--initial-pose", "spec"]),
     Case("hysteresis", "hydrolek", "j2", [("hysteresis", "j2", {"width": (0.4, 0.8)})]),

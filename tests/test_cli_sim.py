@@ -32,14 +32,14 @@ def test_effects_json_catalog(cli):
                  "payload", "sensor_offset", "sensor_gain", "hysteresis", "bulk_modulus"]
     # the research catalog's 16, in its order, and the effects added since (one file each)
     assert [n for n in names if n in catalog16] == catalog16
-    assert "stribeck_friction" in names and "valve_offset" in names and len(set(names)) == len(names) == 18
+    assert {"stribeck_friction", "valve_offset", "pump_limit"} <= set(names) and len(set(names)) == len(names) == 19
     for e in cat:
         assert e["description"] and e["citation"] and e["scope"] in ("per-joint", "global")
         assert e["parameters"]
         for p in e["parameters"]:
             assert {"name", "unit", "default", "lower", "upper"} <= set(p)
             assert p["lower"] <= p["default"] <= p["upper"]
-    assert {e["name"]: e["scope"] for e in cat}["bulk_modulus"] == "global"
+    assert {e["name"]: e["scope"] for e in cat}["bulk_modulus"] == {e["name"]: e["scope"] for e in cat}["pump_limit"] == "global"
 
 
 def test_excite_writes_a_multilevel_prbs(cli, tmp_path):

@@ -7,6 +7,7 @@ import pytest
 from scipy.signal import detrend, welch
 
 from sim_core.components.cylinder import cylinder_length
+from sim_core.components.pump import P_S
 from sim_core.effects import EFFECTS
 from sim_core.kernel import layout as L
 from sim_core.simulator import Simulator
@@ -146,6 +147,38 @@ def test_flow_saturation(arm):
     s9 = run_joint(arm, "j2", step(9.0), effects=eff)[1]
     assert moved(s9) == pytest.approx(moved(s6), rel=0.02)   # speed no longer grows with the command
     assert moved(s9) < 0.8 * moved(run_joint(arm, "j2", step(9.0))[1])
+
+
+def test_pump_limit(arm):
+    """Beyond the pump's flow the speed stops growing with the command; the supply sags while the valve
+    asks for more and recovers once it closes; the line's oil gives a surge that an instantaneous
+    flow cap (flow_saturation) does not."""
+    eff = [("pump_limit", None, {"max_flow": 3e-5})]
+    small = moved(run_joint(arm, "j2", step(1.0), effects=eff)[1])
+    assert small == pytest.approx(moved(run_joint(arm, "j2", step(1.0))[1]), rel=0.02)
+    late = lambda q: q[1100] - q[700]        # steady: the line's oil spent, the pump's flow is all there is
+    s6 = run_joint(arm, "j2", step(6.0), effects=eff)[1]
+    s9 = run_joint(arm, "j2", step(9.0), effects=eff)[1]
+    assert late(s9) == pytest.approx(late(s6), rel=0.03)      # speed no longer grows with the command
+    assert late(s9) < 0.6 * late(run_joint(arm, "j2", step(9.0))[1])
+    # the first 0.2 s after the valve opens: the line's stored oil moves the joint further than a cap of
+    # the same flow lets it
+    early = lambda q: q[400] - q[200]
+    capped = run_joint(arm, "j2", step(9.0), effects=[("flow_saturation", "j2", {"max_flow": 3e-5})])[1]
+    assert early(s9) > 1.3 * early(capped)
+    # the supply node: at its setting at rest, far below it while the valve is open, back after
+    spec = arm.spec.copy()
+    spec.enable_effect("pump_limit", None, max_flow=3e-5)
+    ctx = arm.create_context(spec)
+    sim, u, a = Simulator(ctx), np.zeros(len(arm.joint_names)), arm.joint_names.index("j2")
+    p_set, ps = spec.supply["pressure"], []
+    for k in range(1500):
+        u[a] = 9.0 if 200 <= k < 700 else 0.0
+        sim.step(u, 1e-3)
+        ps.append(ctx.XG[P_S])
+    assert ps[150] == pytest.approx(p_set, rel=1e-3)
+    assert min(ps[200:700]) < 0.7 * p_set
+    assert ps[-1] > 0.97 * p_set
 
 
 def test_line_dynamics(plants):

@@ -72,7 +72,8 @@ ALL_EFFECTS = [("deadband", "j2", {"width": 0.5}), ("valve_asymmetry", "j2", {})
                ("joint_compliance", "j2", {}), ("payload", "j2", {}), ("sensor_offset", "j2", {}),
                ("sensor_gain", "j2", {}), ("hysteresis", "j2", {}), ("bulk_modulus", None, {}),
                ("area_ratio", "j3", {}), ("stribeck_friction", "j4", {}), ("leakage", "j6", {}),
-               ("line_dynamics", "j6", {"bulk_modulus_scale": 0.5}), ("valve_offset", "j5", {"offset": 0.3})]
+               ("line_dynamics", "j6", {"bulk_modulus_scale": 0.5}), ("valve_offset", "j5", {"offset": 0.3}),
+               ("pump_limit", None, {"max_flow": 1.5e-4})]
 
 
 @pytest.mark.slow

@@ -4,7 +4,8 @@ The equations are Merritt's (Hydraulic Control Systems, 1967, ch. 3 and 5) for a
 fed by a 4/3 proportional valve, acting directly on a slide or through its two pins on a boom (the
 law of cosines, by hand), written here from the meaning of the rig templates' parameters (their
 comments in robot.toml and the URDF), with none of sim_core's code: its own state, its own orifice regularisation,
-hose volumes lumped into the chambers, a tanh Coulomb friction, SciPy's LSODA between samples. A
+hose volumes lumped into the chambers, a tanh Coulomb friction, an ideal supply or a fixed pump behind
+a relief valve (its own supply-line state), SciPy's LSODA between samples. A
 logger and a P controller run on the jittered sample grid, as on a test bench, and the log is what
 such a bench writes: `time (s), position (sensor volts, quantised), valve command (V)`.
 
@@ -75,6 +76,11 @@ class Rig:
                                         # current (a valve's null shift: it opens as if commanded)
     piston_leakage: float = 0.0         # m^3/(s Pa); laminar leakage across the piston, A to B
     command_delay: float = 0.0          # s; dead time between the controller's output and the amplifier
+    pump_flow: float = 0.0              # m^3/s; 0: an ideal pressure source at `supply`; else a fixed pump
+                                        # of this flow whose relief valve holds `supply` (it passes the
+                                        # whole flow there, none 2 bar below): the supply line's pressure
+                                        # falls while the valve asks for more
+    supply_volume: float = 1.0e-3       # m^3; oil between the pump and the valve (with a pump_flow)
     laminar_below: float = 1.0e5        # Pa
     stop_stiffness: float = 2.0e7       # N/m; the piston's end stops at 0 and the full stroke (a full
                                         # bore force pushes about 1.4 mm in), damped at 0.7 of critical
@@ -132,7 +138,8 @@ def rhs(rig: Rig, u: float):
     w = 2 * math.pi * rig.spool_hz
 
     def f(_t, y):
-        q, v, pa, pb, i, x, xd = y
+        q, v, pa, pb, i, x, xd = y[:7]
+        ps = y[7] if rig.pump_flow > 0.0 else rig.supply
         xp, arm = piston(q)
         vp = arm * v                                      # rod speed, m/s
         xs = x + rig.null_bias
@@ -140,8 +147,9 @@ def rhs(rig: Rig, u: float):
         op_neg = max(-xs - rig.overlap, 0.0)
         kn = k * rig.negative_flow_ratio
         leak = rig.piston_leakage * (pa - pb)
-        qa = _edge(k, op_pos, rig.supply - pa, rig.laminar_below) - _edge(kn, op_neg, pa - rig.tank, rig.laminar_below) - leak
-        qb = _edge(kn, op_neg, rig.supply - pb, rig.laminar_below) - _edge(k, op_pos, pb - rig.tank, rig.laminar_below) + leak
+        qpa, qpb = _edge(k, op_pos, ps - pa, rig.laminar_below), _edge(kn, op_neg, ps - pb, rig.laminar_below)
+        qa = qpa - _edge(kn, op_neg, pa - rig.tank, rig.laminar_below) - leak
+        qb = qpb - _edge(k, op_pos, pb - rig.tank, rig.laminar_below) + leak
         ca = (rig.dead_a + aa * xp) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
         cb = (rig.dead_b + ab * (full - xp)) / rig.oil_bulk + rig.hose_volume / rig.hose_bulk
         force = pa * aa - pb * ab - rig.viscous * vp - rig.coulomb * math.tanh(vp / 1e-3)
@@ -150,8 +158,12 @@ def rhs(rig: Rig, u: float):
             damping = 1.4 * math.sqrt(rig.stop_stiffness * inertia / arm ** 2)
             push = max(rig.stop_stiffness * depth + damping * speed, 0.0)
             force += push if xp < 0.0 else -push
-        return [v, (force * arm + gravity(q)) / inertia, (qa - aa * vp) / ca, (qb + ab * vp) / cb,
-                (i_ref - i) / rig.coil_tau, xd, w * w * (rig.spool_gain * i - x) - 2 * rig.spool_zeta * w * xd]
+        dy = [v, (force * arm + gravity(q)) / inertia, (qa - aa * vp) / ca, (qb + ab * vp) / cb,
+              (i_ref - i) / rig.coil_tau, xd, w * w * (rig.spool_gain * i - x) - 2 * rig.spool_zeta * w * xd]
+        if rig.pump_flow > 0.0:     # the relief opens over the 2 bar below the supply setting
+            relief = rig.pump_flow * max(ps - rig.supply + 2e5, 0.0) / 2e5
+            dy.append((rig.pump_flow - relief - qpa - qpb) * rig.oil_bulk / rig.supply_volume)
+        return dy
     return f
 
 
@@ -202,7 +214,8 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
     piston, _, gravity = mechanics(rig)
     pa0 = 0.5 * rig.supply                                   # at rest, holding the load: (pa aa - pb ab) arm = -gravity
     pb0 = (pa0 * aa + gravity(q0) / piston(q0)[1]) / ab
-    y = np.array([q0, 0.0, pa0, pb0, 0.0, 0.0, 0.0])
+    y = np.array([q0, 0.0, pa0, pb0, 0.0, 0.0, 0.0] + ([rig.supply] if rig.pump_flow > 0.0 else []))
+    atol = [1e-9, 1e-8, 1.0, 1.0, 1e-7, 1e-7, 1e-5] + ([1.0] if rig.pump_flow > 0.0 else [])
     lsb = 10.0 / 2 ** rig.sensor_bits
     rows, t = [], 0.0
     while t < duration:
@@ -224,8 +237,7 @@ def closed_loop_log(rig: Rig, *, seed: int, duration: float = 60.0, rate: float 
         for a, b in zip(cuts[:-1], cuts[1:]):
             n = int(np.searchsorted(seen_t, a, side="right")) - 1
             u_valve = seen_u[n] if n >= 0 else 0.0
-            sol = solve_ivp(rhs(rig, u_valve), (a, b), y, method="LSODA", rtol=1e-7,
-                            atol=[1e-9, 1e-8, 1.0, 1.0, 1e-7, 1e-7, 1e-5])
+            sol = solve_ivp(rhs(rig, u_valve), (a, b), y, method="LSODA", rtol=1e-7, atol=atol)
             if not sol.success:
                 raise RuntimeError(f"textbook cylinder: {sol.message} at t = {a:.3f} s")
             y = sol.y[:, -1]

@@ -19,6 +19,7 @@ from .joint_compliance import JointCompliance
 from .leakage import Leakage
 from .line_dynamics import LineDynamics
 from .payload import Payload
+from .pump_limit import PumpLimit
 from .sensor_gain import SensorGain
 from .sensor_offset import SensorOffset
 from .spool_lag import SpoolLag
@@ -31,7 +32,7 @@ EFFECTS: dict[str, type[Effect]] = {
     for e in (
         Deadband, ValveAsymmetry, SpoolLag, Delay, Leakage, CoulombFriction, Backlash, AreaRatio,
         FlowSaturation, LineDynamics, JointCompliance, Payload, SensorOffset, SensorGain, Hysteresis,
-        BulkModulus, StribeckFriction, ValveOffset,
+        BulkModulus, StribeckFriction, ValveOffset, PumpLimit,
     )
 }
 
