@@ -57,7 +57,7 @@ MASS_SPAN = 1.25             # the links' masses within x/÷ 1.25 (CAD without h
 
 # nominal parameter (kind) -> bank effects it can masquerade as
 MIMICS: dict[str, tuple[str, ...]] = {
-    "supply_pressure": ("payload", "valve_asymmetry", "area_ratio", "flow_saturation"),
+    "supply_pressure": ("payload", "valve_asymmetry", "area_ratio", "flow_saturation", "pump_limit"),
     "bulk_modulus": ("bulk_modulus", "line_dynamics", "joint_compliance"),
     "viscous_friction": ("coulomb_friction", "stribeck_friction", "joint_compliance", "hysteresis"),
     "payload_mass": ("payload", "coulomb_friction", "sensor_gain", "valve_asymmetry"),

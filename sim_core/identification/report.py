@@ -35,7 +35,7 @@ EVIDENCE = {
     "coulomb_friction": "reversals", "joint_compliance": "after steps", "line_dynamics": "after steps",
     "bulk_modulus": "after steps", "valve_asymmetry": "negative commands", "area_ratio": "negative commands",
     "payload": "raising and lowering", "flow_saturation": "large commands", "sensor_offset": "everywhere",
-    "sensor_gain": "large angles",
+    "sensor_gain": "large angles", "pump_limit": "large commands",
 }
 
 
