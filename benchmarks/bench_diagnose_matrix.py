@@ -342,7 +342,7 @@ ROBOTS = ("hydrolek", "rig")
 
 def build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
     """The selected cases, each drawn as in the whole matrix: a case's magnitude and noise come from its
-    name (:func:`case_rng`), so ``--groups``/``--robots`` select cases without changing them, and an
+    name (:func:`case_key`), so ``--groups``/``--robots`` select cases without changing them, and an
     effect added to the bank adds its own cases without changing the others' (``--robots`` selects
     the singles and clean records; pairs and out-of-bank cases name their own)."""
     return [c for c in _build(seeds, set(GROUPS), set(ROBOTS))
@@ -360,8 +360,9 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
         if "hydrolek" in robots:
             spec = load_robot("hydrolek")
             for (effect, j), k in itertools.product(offered(spec, JOINT), range(seeds)):
-                rng = np.random.default_rng([1000 + k, case_key(f"single/hydrolek/{effect}/{k + 1}")])
-                cases.append({"id": f"single/hydrolek/{effect}/{k + 1}", "group": "singles", "robot": "hydrolek",
+                cid = f"single/hydrolek/{effect}/{k + 1}"
+                rng = np.random.default_rng([1000 + k, case_key(cid)])
+                cases.append({"id": cid, "group": "singles", "robot": "hydrolek",
                               "joint": JOINT, "seed": 100 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3],
                               "noise": float(rng.uniform(2e-4, 1e-3)),
                               "hidden": [(effect, j, magnitude(effect, spec, JOINT, k, seeds, rng))]})
@@ -373,8 +374,9 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
             for (effect, j), k in itertools.product(offered(spec, joint), range(seeds)):
                 if j is None:       # the rig generator hides effects on its joint
                     continue
-                rng = np.random.default_rng([2000 + k, case_key(f"single/rig_boom/{effect}/{k + 1}")])
-                cases.append({"id": f"single/rig_boom/{effect}/{k + 1}", "group": "singles", "robot": "rig",
+                cid = f"single/rig_boom/{effect}/{k + 1}"
+                rng = np.random.default_rng([2000 + k, case_key(cid)])
+                cases.append({"id": cid, "group": "singles", "robot": "rig",
                               "template": "boom", "joint": joint, "seed": 200 + k,
                               "hidden": [(effect, j, magnitude(effect, spec, joint, k, seeds, rng))]})
             shutil.rmtree(tmp, ignore_errors=True)
@@ -386,7 +388,8 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
             spec = load_robot(robot)
             if a not in RANGES or b not in RANGES:
                 continue
-            key = case_key(f"pair/{robot}/{a}+{b}")
+            cid = f"pair/{robot}/{a}+{b}"
+            key = case_key(cid)
             rng = np.random.default_rng([3000, key])
             hidden = []
             for e in (a, b):
@@ -395,7 +398,7 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
                 if robot == "harvester" and e == "deadband":
                     params = {"width": 1.7}                       # its nominal deadband is 1.2 V
                 hidden.append((e, j, params))
-            cases.append({"id": f"pair/{robot}/{a}+{b}", "group": "pairs", "robot": robot, "joint": joint,
+            cases.append({"id": cid, "group": "pairs", "robot": robot, "joint": joint,
                           "seed": 300 + key % 1000, "excitation": "prbs", "noise": 4e-4, "hidden": hidden})
     if "clean" in groups:
         for k in range(seeds):

@@ -39,7 +39,8 @@ def test_effects_json_catalog(cli):
         for p in e["parameters"]:
             assert {"name", "unit", "default", "lower", "upper"} <= set(p)
             assert p["lower"] <= p["default"] <= p["upper"]
-    assert {e["name"]: e["scope"] for e in cat}["bulk_modulus"] == {e["name"]: e["scope"] for e in cat}["pump_limit"] == "global"
+    scopes = {e["name"]: e["scope"] for e in cat}
+    assert scopes["bulk_modulus"] == scopes["pump_limit"] == "global"
 
 
 def test_excite_writes_a_multilevel_prbs(cli, tmp_path):

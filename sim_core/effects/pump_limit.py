@@ -33,7 +33,8 @@ class PumpLimit(Effect):
         flows = [js.components["valve"].full_opening_flow(ps) for js in spec.joints if "valve" in js.components]
         if not flows:
             return None
-        q, lo, hi = max(flows), 0.02 * max(flows), 2.0 * sum(flows)
+        q = max(flows)
+        lo, hi = 0.02 * q, 2.0 * sum(flows)
         grid = [q * f for f in (0.08, 0.15, 0.25, 0.4, 0.6, 0.85)]
         spec_limit = spec.supply["max_flow"]
         null = current["max_flow"] if current else (spec_limit if spec_limit > 0 else hi)
