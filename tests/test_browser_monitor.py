@@ -260,7 +260,7 @@ def test_plots_and_health_in_the_page(hydrolek):
     with httpx.Client(base_url=m.server.url, timeout=10) as c:
         c.put("/api/v1/commands", json={"voltages": {"j1": 1.0}}).raise_for_status()
         m.page.get_by_role("tab", name="Plots").click()
-        m.page.wait_for_selector(".uplot canvas", timeout=15000)
+        m.page.wait_for_selector(".uplot canvas:visible", timeout=15000)  # a collapsed plot keeps a 0-px canvas
         m.page.wait_for_timeout(3000)
         c.put("/api/v1/commands", json={"voltages": {"j1": 0.0}}).raise_for_status()
 
@@ -307,7 +307,7 @@ def test_other_robots_are_drawn_and_move(browser, tmp_path_factory, robot, joint
         assert_arm_drawn(m)
         assert_arm_moves(m, joint, volts, seconds)
         m.page.get_by_role("tab", name="Plots").click()
-        m.page.wait_for_selector(".uplot canvas", timeout=15000)
+        m.page.wait_for_selector(".uplot canvas:visible", timeout=15000)  # a collapsed plot keeps a 0-px canvas
         m.page.wait_for_timeout(2000)
         m.page.screenshot(path=str(m.dir / f"{robot}_plots.png"))
     finally:
