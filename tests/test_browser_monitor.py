@@ -13,8 +13,8 @@ import httpx
 import numpy as np
 import pytest
 from viser import GuiEvent
-from web_helpers import (CHROMIUM, CHROMIUM_ARGS, InProcessServer, artifacts_dir, changed, dismiss_notifications,
-                         open_page, project, region_mask, require_chromium, settled_screenshot, wait_for)
+from web_helpers import (CHROMIUM, CHROMIUM_ARGS, LAUNCH_TIMEOUT_MS, InProcessServer, artifacts_dir, changed,
+                         dismiss_notifications, open_page, project, region_mask, require_chromium, settled_screenshot, wait_for)
 
 from web.panel import HOLD_OFF_S
 
@@ -29,7 +29,8 @@ def browser():
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
+                              timeout=LAUNCH_TIMEOUT_MS)
         yield b
         b.close()
 

@@ -3,7 +3,8 @@ until this browser enters the token, then the same slider commands the plant."""
 
 import pytest
 
-from web_helpers import CHROMIUM, CHROMIUM_ARGS, InProcessServer, dismiss_notifications, open_page, require_chromium, wait_for
+from web_helpers import (CHROMIUM, CHROMIUM_ARGS, LAUNCH_TIMEOUT_MS, InProcessServer, dismiss_notifications, open_page,
+                         require_chromium, wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -18,7 +19,8 @@ def test_a_panel_beyond_loopback_is_read_only_until_the_browser_enters_the_token
     try:
         svc = srv.svc
         with sync_playwright() as p:
-            b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+            b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS,
+                                  timeout=LAUNCH_TIMEOUT_MS)
             try:
                 page = open_page(b, f"http://127.0.0.1:{srv.viewer.port}/")
                 dismiss_notifications(page)

@@ -23,6 +23,10 @@ CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swi
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
                  "--no-first-run"]
 VIEWPORT = {"width": 1280, "height": 800}
+# ms: the first start of a freshly installed Chromium on a loaded 2-core machine may take longer than
+# Playwright's default 30 s (a fresh CI clone once errored every test of the monitor's module in its
+# browser fixture; its log was not kept, and a slow first start is the likeliest cause)
+LAUNCH_TIMEOUT_MS = 180_000
 
 
 def artifacts_dir() -> Path:
