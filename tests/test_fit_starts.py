@@ -29,7 +29,7 @@ LEAK = 2e-12              # m^3/(s Pa), the hidden cross-port leak
 OVERSHOOT = 3e-10         # m^3/(s Pa), the grid's only start (the search range's top)
 # m^3/(s Pa): a start 25 times too large, inside the range. From OVERSHOOT itself the profiled flow gain
 # starts on its own lower bound too, and the fit out of that corner ended within its budget on one CPU and
-# more than the 80 of its budget on another (AMD EPYC); from here 47 on that one
+# needed more than the 80 of its budget on another (AMD EPYC); from here 47 on that one
 START = 5e-11
 NULL = 1e-30              # m^3/(s Pa): 1e-23 m^3/s at 10 MPa, far below a chamber pressure's rounding
 
