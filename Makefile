@@ -16,8 +16,19 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(VENV)/bin/hydrohil serve
 
+# Two passes: the CPU-bound tests spread over the cores (pytest-xdist, whole files per worker so a
+# module's fixtures run once), then the tests marked `realtime` (servers, the browser, Ray) alone,
+# so no neighbour's load bends their timing. Both passes always run. A pass that selects nothing
+# (PYTEST_ARGS naming one file, say) is fine as long as the other ran something.
+TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	@rc=0; ran=0; \
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --maxprocesses=4 --dist loadfile -m "not realtime" $(PYTEST_ARGS); r=$$?; \
+	if [ $$r -ne 5 ]; then ran=1; [ $$r -eq 0 ] || rc=$$r; fi; \
+	$(PY) -m pytest -q -m realtime $(PYTEST_ARGS); r=$$?; \
+	if [ $$r -ne 5 ]; then ran=1; [ $$r -eq 0 ] || rc=$$r; fi; \
+	[ $$ran -eq 1 ] || { echo "make test: no test selected"; rc=5; }; \
+	exit $$rc
 
 bench: $(STAMP)
 	$(VENV)/bin/hydrohil bench

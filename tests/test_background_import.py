@@ -5,7 +5,11 @@ import os
 import threading
 import time
 
+import pytest
+
 from sim_core import background_import
+
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
 
 
 def _slow(done: threading.Event, seconds: float = 0.4):

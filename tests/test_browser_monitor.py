@@ -18,7 +18,7 @@ from web_helpers import (CHROMIUM, CHROMIUM_ARGS, LAUNCH_TIMEOUT_MS, InProcessSe
 
 from web.panel import HOLD_OFF_S
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.realtime]
 
 MARGIN_PX = 12
 

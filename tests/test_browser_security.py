@@ -6,7 +6,7 @@ import pytest
 from web_helpers import (CHROMIUM, CHROMIUM_ARGS, LAUNCH_TIMEOUT_MS, InProcessServer, dismiss_notifications, open_page,
                          require_chromium, wait_for)
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.realtime]
 
 TOKEN = "unlock-me"
 

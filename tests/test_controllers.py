@@ -30,6 +30,8 @@ from controllers.scenarios import (MARS_DEADBAND_V, MARS_SETTLED_RAD, SCENARIOS,
 
 from conftest import ARTIFACTS, ROOT
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 OUT = ARTIFACTS / "controllers"
 
 

@@ -21,6 +21,8 @@ import ray
 
 from conftest import ROOT
 
+pytestmark = pytest.mark.realtime   # a local Ray takes every core: run alone, not beside the parallel tests
+
 # the helper task below travels to Ray's workers by value (tests/ is not on their path)
 ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
 

@@ -18,6 +18,8 @@ from hil_server.engine import shared as S
 
 from web_helpers import InProcessServer
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 
 def test_the_seqlock_compiles_to_acquire_release_barriers_on_arm64():
     """Cross-compile the compiled reader and writer for aarch64: the reader must load the sequence

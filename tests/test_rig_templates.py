@@ -264,6 +264,7 @@ def test_a_rig_directory_works_through_excite_and_simulate(cli, rigs, tmp_path):
     assert "q_boom" in header and "u_boom" in header
 
 
+@pytest.mark.realtime
 def test_serve_and_dbc_run_a_rig_directory(cli, rigs, tmp_path):
     """hydrohil serve --robot DIR: the engine runs the rig, REST commands move it, the CAN database is
     generated from its joints (also what 'hydrohil dbc --robot DIR' prints)."""

@@ -18,6 +18,8 @@ from hil_server.service import HilService, ServiceConfig
 
 from server_helpers import ServerProcess
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 CONTROLLER = r"""
 import json, sys, time, logging, can, cantools
 logging.getLogger("can").setLevel(logging.ERROR)

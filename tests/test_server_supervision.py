@@ -19,6 +19,8 @@ from sim_core.dataset import read_csv
 
 from server_helpers import ServerProcess
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 DB = cantools.database.load_file(str(D.dbc_path("hydrolek")))
 FB_IDS = {m.frame_id for m in DB.messages if m.name.startswith(("JointFeedback_", "JointPressure_"))}
 EMCY, HB, STATUS, ENGINE = (DB.get_message_by_name(n) for n in ("Emergency", "Heartbeat", "HilStatus", "EngineStatus"))

@@ -16,6 +16,8 @@ from hil_server.can import dbc as D
 
 from server_helpers import ServerProcess
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 STOCK_CLIENT = r"""
 import json, sys, time, can, cantools
 bus_kw, dbc = json.loads(sys.argv[1]), sys.argv[2]

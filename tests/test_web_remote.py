@@ -11,6 +11,8 @@ import pytest
 from server_helpers import ServerProcess
 from web_helpers import WINDOW_S, ViewProcess, ViserProbe, frame_rate, free_port, get_or_none, wait_for
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 
 def test_serve_starts_the_viewer(tmp_path):
     port = free_port()

@@ -10,6 +10,8 @@ import pytest
 
 from web_helpers import WINDOW_S, InProcessServer, ViserProbe, frame_rate, wait_for
 
+pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+
 
 def joint_angle_from_wxyz(scene, dof: str, wxyz) -> float:
     """Undo the fixed joint-origin rotation: q from the quaternion viser was sent for that body."""
