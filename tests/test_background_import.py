@@ -9,7 +9,7 @@ import pytest
 
 from sim_core import background_import
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def _slow(done: threading.Event, seconds: float = 0.4):

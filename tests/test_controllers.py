@@ -30,7 +30,7 @@ from controllers.scenarios import (MARS_DEADBAND_V, MARS_SETTLED_RAD, SCENARIOS,
 
 from conftest import ARTIFACTS, ROOT
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 OUT = ARTIFACTS / "controllers"
 

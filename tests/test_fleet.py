@@ -21,7 +21,7 @@ import ray
 
 from conftest import ROOT
 
-pytestmark = pytest.mark.realtime   # a local Ray takes every core: run alone, not beside the parallel tests
+pytestmark = pytest.mark.realtime
 
 # the helper task below travels to Ray's workers by value (tests/ is not on their path)
 ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -18,7 +18,7 @@ from hil_server.engine import shared as S
 
 from web_helpers import InProcessServer
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def test_the_seqlock_compiles_to_acquire_release_barriers_on_arm64():

@@ -18,7 +18,7 @@ from sim_core.model.spec import available_robots, load_robot
 
 from server_helpers import ROOT, ServerProcess, free_port
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def test_dbc_is_shipped_for_every_robot_with_the_contract_names(cli):

@@ -18,7 +18,7 @@ from hil_server.service import HilService, ServiceConfig
 
 from server_helpers import ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 CONTROLLER = r"""
 import json, sys, time, logging, can, cantools

@@ -15,7 +15,7 @@ from sim_core.dataset import read_csv
 
 from server_helpers import ROOT, ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def test_mutating_endpoints_need_the_bearer_token(tmp_path):

@@ -12,7 +12,7 @@ from sim_core.model.spec import load_robot
 
 from server_helpers import ROOT
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 LIFT = ROOT / "tests" / "data" / "lift" / "robot.toml"
 

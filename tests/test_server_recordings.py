@@ -16,7 +16,7 @@ from sim_core.dataset import read_csv
 
 from server_helpers import ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 UNIT = {"time": "s", "u": "V", "q": "rad", "p": "Pa"}
 

@@ -12,7 +12,7 @@ from sim_core.dataset import read_csv
 
 from server_helpers import ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 JOINT_KEYS = {"angle", "sensor_voltage", "command_voltage", "pressure_a", "pressure_b", "velocity"}
 

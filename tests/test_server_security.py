@@ -17,7 +17,7 @@ from hil_server.security import is_loopback, resolve_token
 from server_helpers import ServerProcess, free_port
 from web_helpers import ViserProbe, get_or_none, wait_for
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 TOKEN = "t0ken-for-tests"
 

@@ -19,7 +19,7 @@ from sim_core.dataset import read_csv
 
 from server_helpers import ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 DB = cantools.database.load_file(str(D.dbc_path("hydrolek")))
 FB_IDS = {m.frame_id for m in DB.messages if m.name.startswith(("JointFeedback_", "JointPressure_"))}

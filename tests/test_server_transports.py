@@ -16,7 +16,7 @@ from hil_server.can import dbc as D
 
 from server_helpers import ServerProcess
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 STOCK_CLIENT = r"""
 import json, sys, time, can, cantools

@@ -11,7 +11,7 @@ import pytest
 from server_helpers import ServerProcess
 from web_helpers import WINDOW_S, ViewProcess, ViserProbe, frame_rate, free_port, get_or_none, wait_for
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def test_serve_starts_the_viewer(tmp_path):

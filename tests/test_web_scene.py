@@ -8,7 +8,7 @@ import pytest
 from sim_core.components.cylinder import cylinder_length
 from sim_core.model.spec import load_robot
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 ROBOTS = ["hydrolek", "mars_nd", "harvester"]
 

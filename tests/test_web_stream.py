@@ -10,7 +10,7 @@ import pytest
 
 from web_helpers import WINDOW_S, InProcessServer, ViserProbe, frame_rate, wait_for
 
-pytestmark = pytest.mark.realtime   # against the wall clock: run alone, not beside the parallel CPU-bound tests
+pytestmark = pytest.mark.realtime
 
 
 def joint_angle_from_wxyz(scene, dof: str, wxyz) -> float:
