@@ -50,6 +50,7 @@ def run_serve(args) -> int:
 
     from .api.app import create_app
     from .api.http_server import uvicorn_config
+    from .engine.process import EngineStartError
     from .security import SecurityError, check_bind, is_loopback, resolve_token
     from .service import HilService, ServiceConfig, ServiceError
 
@@ -87,6 +88,11 @@ def run_serve(args) -> int:
         svc = HilService(cfg)
     except (ServiceError, SpecError) as exc:
         raise CliError(str(exc)) from None
+    except EngineStartError as exc:     # the engine's own traceback, if it sent one, goes to the log
+        first, _, detail = str(exc).partition("\n")
+        if detail:
+            log.error("engine start-up:\n%s", detail)
+        raise CliError(first) from None
     h = svc.health.document()
     log.info("robot %s at %g Hz (%s), REST http://%s:%d, CAN %s, engine restart %s", cfg.robot, cfg.rate_hz, cfg.mode,
              cfg.host, cfg.port, cfg.can or "off", cfg.engine_restart)

@@ -84,6 +84,8 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
     request id); ``events``: one-way notices to the service's supervisor."""
     if parent_pid:
         _die_with_parent(parent_pid)
+    from sim_core.kernel.compile_notice import on_kernel_compile
+    from sim_core.kernel.compose import cache_dir
     from sim_core.plant import Plant
     from sim_core.simulator import Simulator
 
@@ -94,8 +96,10 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
     try:
         spec = pickle.loads(spec_blob)
         plant = Plant(spec)
-        warm = Simulator(plant.create_context())
-        warm.step(np.zeros(len(spec.joints)), 1.0 / cfg.rate_hz)  # load the compiled kernel before timing
+        # a kernel numba has not cached yet is compiled here: say so, the service then waits for it
+        with on_kernel_compile(lambda: conn.send((None, "compiling", {"cache": str(cache_dir())}))):
+            warm = Simulator(plant.create_context())
+            warm.step(np.zeros(len(spec.joints)), 1.0 / cfg.rate_hz)  # load the compiled kernel before timing
         ctx = plant.create_context(seed=cfg.seed)
         sim = Simulator(ctx)
         rt, note = _raise_priority(cfg)
@@ -214,6 +218,40 @@ class EngineDown(RuntimeError):
     """The engine process is not running (died, stalled and killed, stopped, restarting)."""
 
 
+COMPILE_TIMEOUT_S = 1800.0   # s; a first compile of the kernel takes 1-3 min on a 2-core machine
+
+
+class EngineStartError(RuntimeError):
+    """The engine process did not come up: it failed, exited or stayed silent past its time."""
+
+
+def await_ready(conn, process, start_timeout: float, compile_timeout: float = COMPILE_TIMEOUT_S) -> dict:
+    """Wait for the engine's ``ready`` on ``conn`` and return its info. The engine has
+    ``start_timeout`` seconds; once it says it is compiling the kernel (numba had none cached for
+    this robot), ``compile_timeout`` from then: a first compile is slow, not hung."""
+    timeout, compiling = start_timeout, False
+    while True:
+        if not conn.poll(timeout):
+            process.kill()
+            if compiling:
+                raise EngineStartError(f"engine did not finish compiling the simulation kernel within {timeout:.0f} s")
+            raise EngineStartError(f"engine did not start within {timeout:.0f} s")
+        try:
+            _, kind, info = conn.recv()
+        except EOFError:
+            process.join(1.0)
+            raise EngineStartError(f"engine process exited during start-up (exit code {process.exitcode})") from None
+        if kind == "compiling" and not compiling:
+            log.info("compiling the simulation kernel for this robot (its first use on this machine: a minute "
+                     "or more; cached in %s for every later start)", info.get("cache", "?"))
+            timeout, compiling = max(start_timeout, compile_timeout), True
+            continue
+        if kind != "ready":
+            process.join(5.0)
+            raise EngineStartError(str(info))
+        return info
+
+
 class EngineClient:
     """Service-side handle: starts the engine process and sends it requests (thread-safe).
 
@@ -221,7 +259,8 @@ class EngineClient:
     after its request timed out, or an unsolicited message from a dying engine, is counted and
     dropped, never taken as the answer to a later request."""
 
-    def __init__(self, spec, cfg: EngineConfig, layout: S.Layout, block: S.SharedBlock, start_timeout: float = 120.0):
+    def __init__(self, spec, cfg: EngineConfig, layout: S.Layout, block: S.SharedBlock, start_timeout: float = 120.0,
+                 compile_timeout: float = COMPILE_TIMEOUT_S):
         self.cfg = cfg
         self.block = block
         ctx = mp.get_context("spawn")
@@ -236,18 +275,7 @@ class EngineClient:
         self.process.start()
         child.close()
         child_events.close()
-        if not self._conn.poll(start_timeout):
-            self.process.kill()
-            raise RuntimeError("engine did not start within %.0f s" % start_timeout)
-        try:
-            _, kind, info = self._conn.recv()
-        except EOFError:
-            self.process.join(1.0)
-            raise RuntimeError(f"engine process exited during start-up (exit code {self.process.exitcode})") from None
-        if kind != "ready":
-            self.process.join(5.0)
-            raise RuntimeError(info)
-        self.info = info
+        self.info = await_ready(self._conn, self.process, start_timeout, compile_timeout)
 
     @property
     def pid(self) -> int | None:

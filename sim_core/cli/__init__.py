@@ -32,8 +32,16 @@ def main(argv: list[str] | None = None) -> int:
     # 'hydrohil serve'. A closed stdout ('hydrohil effects | head') is handled below instead.
     parser = build_parser()
     args = parser.parse_args(argv)
+    from ..kernel.compile_notice import on_kernel_compile
+    from ..kernel.compose import cache_dir
+
+    def compiling():     # a first run would otherwise sit silent for minutes
+        print(f"hydrohil {args.command}: compiling the simulation kernel (its first use on this machine: a minute "
+              f"or more; cached in {cache_dir()} for later runs)", file=sys.stderr, flush=True)
+
     try:
-        rc = args.func(args)
+        with on_kernel_compile(compiling):
+            rc = args.func(args)
     except (CliError, ParameterError, ValueError, KeyError, FileNotFoundError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"hydrohil {args.command}: error: {msg}", file=sys.stderr)

@@ -29,6 +29,7 @@ SKELETON = Path(__file__).with_name("skeleton.py")
 PACKAGE = Path(__file__).resolve().parent.parent
 SOURCE_DIRS = ("kernel", "components", "effects", "dynamics")
 KEEP = 12  # kernels kept in the cache directory
+MODULE_PREFIX = "hydrohil_kernel_"  # the generated module's name: the prefix, then the source key
 
 
 class CompositionError(RuntimeError):
@@ -223,7 +224,7 @@ def kernel():
         return _MODULE
     text = generate()
     key = source_key(text)
-    name = f"hydrohil_kernel_{key}"
+    name = f"{MODULE_PREFIX}{key}"
     root = cache_dir()
     d = root / f"k_{key}"
     path = d / f"{name}.py"
