@@ -46,14 +46,14 @@ def test_the_notice_fires_once_on_a_kernel_compile_and_never_for_other_code(tmp_
 
 
 def _compiles_then_ready(conn, compile_s):
-    conn.send((None, "compiling", {"cache": "/somewhere"}))
+    conn.send((None, "compiling", {"notice": "compiling the simulation kernel (a test)"}))
     time.sleep(compile_s)
     conn.send((None, "ready", {"pid": 1}))
     time.sleep(30)
 
 
 def _compiles_forever(conn):
-    conn.send((None, "compiling", {"cache": "/somewhere"}))
+    conn.send((None, "compiling", {"notice": "compiling the simulation kernel (a test)"}))
     time.sleep(60)
 
 

@@ -84,8 +84,7 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
     request id); ``events``: one-way notices to the service's supervisor."""
     if parent_pid:
         _die_with_parent(parent_pid)
-    from sim_core.kernel.compile_notice import on_kernel_compile
-    from sim_core.kernel.compose import cache_dir
+    from sim_core.kernel.compile_notice import notice, on_kernel_compile
     from sim_core.plant import Plant
     from sim_core.simulator import Simulator
 
@@ -97,7 +96,7 @@ def engine_main(spec_blob: bytes, cfg: EngineConfig, shm_name: str, layout: S.La
         spec = pickle.loads(spec_blob)
         plant = Plant(spec)
         # a kernel numba has not cached yet is compiled here: say so, the service then waits for it
-        with on_kernel_compile(lambda: conn.send((None, "compiling", {"cache": str(cache_dir())}))):
+        with on_kernel_compile(lambda: conn.send((None, "compiling", {"notice": notice()}))):
             warm = Simulator(plant.create_context())
             warm.step(np.zeros(len(spec.joints)), 1.0 / cfg.rate_hz)  # load the compiled kernel before timing
         ctx = plant.create_context(seed=cfg.seed)
@@ -241,9 +240,8 @@ def await_ready(conn, process, start_timeout: float, compile_timeout: float = CO
         except EOFError:
             process.join(1.0)
             raise EngineStartError(f"engine process exited during start-up (exit code {process.exitcode})") from None
-        if kind == "compiling" and not compiling:
-            log.info("compiling the simulation kernel for this robot (its first use on this machine: a minute "
-                     "or more; cached in %s for every later start)", info.get("cache", "?"))
+        if kind == "compiling":
+            log.info("%s", info["notice"])
             timeout, compiling = max(start_timeout, compile_timeout), True
             continue
         if kind != "ready":

@@ -8,6 +8,7 @@ import sys
 from importlib.metadata import entry_points
 
 from ..components.base import ParameterError
+from ..kernel.compile_notice import notice, on_kernel_compile
 
 
 class CliError(Exception):
@@ -32,12 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     # 'hydrohil serve'. A closed stdout ('hydrohil effects | head') is handled below instead.
     parser = build_parser()
     args = parser.parse_args(argv)
-    from ..kernel.compile_notice import on_kernel_compile
-    from ..kernel.compose import cache_dir
 
     def compiling():     # a first run would otherwise sit silent for minutes
-        print(f"hydrohil {args.command}: compiling the simulation kernel (its first use on this machine: a minute "
-              f"or more; cached in {cache_dir()} for later runs)", file=sys.stderr, flush=True)
+        print(f"hydrohil {args.command}: {notice()}", file=sys.stderr, flush=True)
 
     try:
         with on_kernel_compile(compiling):

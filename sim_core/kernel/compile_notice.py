@@ -12,7 +12,7 @@ from contextlib import contextmanager
 
 from numba.core import event
 
-from .compose import MODULE_PREFIX
+from .compose import MODULE_PREFIX, cache_dir
 
 
 def _is_kernel(ev) -> bool:
@@ -44,3 +44,9 @@ def on_kernel_compile(callback):
     function of the generated kernel module; never when the kernel comes from the cache."""
     with event.install_listener("numba:compile", _KernelCompileListener(callback)):
         yield
+
+
+def notice() -> str:
+    """The line a caller shows while the kernel compiles (the CLI on stderr, the service in its log)."""
+    return (f"compiling the simulation kernel (its first use on this machine: a minute or more; cached in "
+            f"{cache_dir()} for later runs)")
