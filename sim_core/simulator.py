@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernel import layout as L
+from .dynamics.compiled_arg import compiled_arg
 from .kernel.compose import kernel
 from .kernel.workspace import make_workspace, tree_arrays
 
@@ -62,6 +63,7 @@ class Simulator:
         n, na = ctx.spec.tree.n, len(ctx.spec.joints)
         self._kernel = kernel()
         self._ws = make_workspace(n, na)
+        self._tree_made = None
         # one-step buffers for the real-time loop (no allocation per tick)
         self._dt1 = np.zeros(1)
         self._u1 = np.zeros((1, na))
@@ -71,7 +73,13 @@ class Simulator:
         self._ya1 = np.zeros((1, na, L.YA_N))
 
     def _tree(self):
-        return tree_arrays(self.context.spec.tree, self.context.lowered)
+        """The tree's arrays for the kernel, rebuilt when the context's tree or lowering is replaced
+        (a parameter set), not on every call."""
+        c = self.context
+        made = self._tree_made
+        if made is None or made[0] is not c.spec.tree or made[1] is not c.lowered:
+            self._tree_made = made = (c.spec.tree, c.lowered, tree_arrays(c.spec.tree, c.lowered))
+        return made[2]
 
     def _call(self, dts, U, Yt, Yq, Yqd, Ya) -> int:
         c = self.context
@@ -98,14 +106,14 @@ class Simulator:
         c = self.context
         na = len(c.spec.joints)
         row = np.zeros((na, L.YA_N))
-        self._kernel.sample_sensors(c.AP, c.XQ[0], c.XS, c.rng, row, np.zeros(na) if u is None else np.asarray(u, float))
+        self._kernel.sample_sensors(c.AP, c.XQ[0], c.XS, c.rng, row, np.zeros(na) if u is None else compiled_arg(u, float))
         return row
 
     def run(self, times, U) -> Trajectory:
         """Simulate on the time grid ``times`` [N] with commands ``U`` [N, n_act] (ZOH)."""
         c = self.context
         times = np.asarray(times, dtype=float)
-        U = np.ascontiguousarray(U, dtype=float)
+        U = compiled_arg(U, dtype=float)
         N = times.shape[0]
         n, na = c.spec.tree.n, len(c.spec.joints)
         if U.shape != (N, na):

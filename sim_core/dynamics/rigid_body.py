@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from ..model.urdf import PRISMATIC
+from .compiled_arg import compiled_arg
 
 _NJ = dict(cache=True, nogil=True, fastmath=False)
 
@@ -403,21 +404,21 @@ class RigidBodyModel:
 
     def __init__(self, tree, mass=None, com=None, inertia=None):
         self.tree = tree
-        self.parent = np.ascontiguousarray(tree.parent)
-        self.R_tree = np.ascontiguousarray(tree.R_tree)
-        self.p_tree = np.ascontiguousarray(tree.p_tree)
-        self.axis = np.ascontiguousarray(tree.axis)
-        self.jtype = np.ascontiguousarray(tree.jtype, dtype=np.int64)
-        self.mass = np.ascontiguousarray(tree.mass if mass is None else mass, dtype=float)
-        self.com = np.ascontiguousarray(tree.com if com is None else com, dtype=float)
-        self.inertia = np.ascontiguousarray(tree.inertia if inertia is None else inertia, dtype=float)
-        self.gravity = np.ascontiguousarray(tree.gravity, dtype=float)
+        self.parent = compiled_arg(tree.parent)
+        self.R_tree = compiled_arg(tree.R_tree)
+        self.p_tree = compiled_arg(tree.p_tree)
+        self.axis = compiled_arg(tree.axis)
+        self.jtype = compiled_arg(tree.jtype, dtype=np.int64)
+        self.mass = compiled_arg(tree.mass if mass is None else mass, dtype=float)
+        self.com = compiled_arg(tree.com if com is None else com, dtype=float)
+        self.inertia = compiled_arg(tree.inertia if inertia is None else inertia, dtype=float)
+        self.gravity = compiled_arg(tree.gravity, dtype=float)
         self.ws = RigidBodyWorkspace(tree.n)
 
     def _kin(self, q):
         ws = self.ws
         kinematics(self.parent, self.R_tree, self.p_tree, self.axis, self.com, self.inertia,
-                   np.ascontiguousarray(q, dtype=float), ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33, self.jtype)
+                   compiled_arg(q, dtype=float), ws.Rw, ws.ow, ws.aw, ws.cw, ws.Iw, ws.tmp33, self.jtype)
 
     def inverse_dynamics(self, q, qd, qdd, gravity: bool = True) -> np.ndarray:
         """Joint forces ``M qdd + c(q, qd) + g(q)`` (N m revolute, N prismatic)."""
@@ -425,7 +426,7 @@ class RigidBodyModel:
         ws = self.ws
         tau = np.zeros(self.tree.n)
         rnea(self.parent, self.mass, self.gravity, ws.ow, ws.aw, ws.cw, ws.Iw,
-             np.ascontiguousarray(qd, dtype=float), np.ascontiguousarray(qdd, dtype=float),
+             compiled_arg(qd, dtype=float), compiled_arg(qdd, dtype=float),
              1.0 if gravity else 0.0, ws.w, ws.dw, ws.ao, ws.F, ws.N, tau, self.jtype)
         return tau
 

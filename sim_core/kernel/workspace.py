@@ -10,6 +10,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from ..dynamics.compiled_arg import compiled_arg
 from ..model.urdf import PRISMATIC
 from . import layout as L
 
@@ -36,12 +37,14 @@ Workspace = namedtuple("Workspace", [
 
 
 def tree_arrays(tree, lowered) -> TreeArrays:
-    """The kinematic tree with the lowered (payload-adjusted) masses and inertias."""
+    """The kinematic tree with the lowered (payload-adjusted) masses and inertias, every array as
+    the kernel's one compiled signature takes it (:func:`compiled_arg`)."""
     jtype = None     # all revolute: the prismatic branches are compiled out
     if tree.jtype is not None and np.any(np.asarray(tree.jtype) == PRISMATIC):
-        jtype = np.ascontiguousarray(tree.jtype, dtype=np.int64)
-    return TreeArrays(tree.parent, tree.R_tree, tree.p_tree, tree.axis, lowered.mass, lowered.com,
-                      lowered.inertia, tree.gravity, jtype)
+        jtype = compiled_arg(tree.jtype, dtype=np.int64)
+    c = compiled_arg
+    return TreeArrays(c(tree.parent), c(tree.R_tree), c(tree.p_tree), c(tree.axis), c(lowered.mass), c(lowered.com),
+                      c(lowered.inertia), c(tree.gravity), jtype)
 
 
 def make_workspace(n: int, na: int) -> Workspace:
