@@ -21,15 +21,29 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 
-def family_specs() -> dict:
-    """{kind: a robot spec of that kind}: one robot for every argument signature of the kernel."""
+def _revolute_robot():
+    from .model.spec import load_robot
+
+    return load_robot("hydrolek")
+
+
+def _prismatic_robot():
+    """A ``cylinder`` template rig: a load on a prismatic joint."""
     from .model.spec import load_robot
     from .rigs import new_rig
 
     with tempfile.TemporaryDirectory(prefix="hydrohil-precompile-") as tmp:
-        new_rig("cylinder", tmp)              # a load on a prismatic joint
-        prismatic = load_robot(tmp)
-    return {"revolute": load_robot("hydrolek"), "prismatic": prismatic}
+        new_rig("cylinder", tmp)
+        return load_robot(tmp)
+
+
+# {kind: a function that loads a robot of that kind}: one robot for every argument signature of the kernel
+FAMILIES = {"revolute": _revolute_robot, "prismatic": _prismatic_robot}
+
+
+def family_specs() -> dict:
+    """{kind: a robot spec of that kind} for every kind in :data:`FAMILIES`."""
+    return {kind: load() for kind, load in FAMILIES.items()}
 
 
 def warm(kind: str, reference: bool = False) -> dict:
@@ -41,7 +55,7 @@ def warm(kind: str, reference: bool = False) -> dict:
     from .simulator import Simulator
 
     t0 = time.perf_counter()
-    spec = family_specs()[kind]
+    spec = FAMILIES[kind]()
     compiled: list[bool] = []
     t = np.arange(0.0, 0.1, 0.01)
     U = np.zeros((t.size, len(spec.joint_names)))
@@ -56,7 +70,7 @@ def warm(kind: str, reference: bool = False) -> dict:
 
 def precompile(reference: bool = False) -> list[dict]:
     """Every kind side by side, each in a fresh process (numba's compiler holds one core each)."""
-    kinds = ("revolute", "prismatic")
+    kinds = tuple(FAMILIES)
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=len(kinds), mp_context=ctx) as pool:
         return list(pool.map(warm, kinds, [reference] * len(kinds)))

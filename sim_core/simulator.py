@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernel import layout as L
 from .dynamics.compiled_arg import compiled_arg
+from .kernel import layout as L
 from .kernel.compose import kernel
 from .kernel.workspace import make_workspace, tree_arrays
 

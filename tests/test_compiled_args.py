@@ -3,16 +3,14 @@ workers: pickle protocol 5, buffers out of band) simulate on the kernel already 
 same result: numba would otherwise compile the whole kernel again for the read-only types."""
 
 import pickle
-import tempfile
 
 import numpy as np
 import pytest
 from numba.core import event
 
 from sim_core.dynamics.rigid_body import RigidBodyModel
-from sim_core.model.spec import load_robot
 from sim_core.plant import Plant
-from sim_core.rigs import new_rig
+from sim_core.precompile import FAMILIES
 from sim_core.simulator import Simulator
 
 
@@ -35,21 +33,13 @@ def _through_object_store(obj):
     return pickle.loads(data, buffers=[memoryview(bytes(b.raw())) for b in buffers])
 
 
-def _robot(kind):
-    if kind == "revolute":
-        return load_robot("hydrolek")
-    with tempfile.TemporaryDirectory() as tmp:
-        new_rig("cylinder", tmp)
-        return load_robot(tmp)
-
-
 def _run(spec, t, U):
     return Simulator(Plant(spec).create_context(seed=3)).run(t, U)
 
 
-@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+@pytest.mark.parametrize("kind", list(FAMILIES))
 def test_a_read_only_spec_and_commands_run_on_the_compiled_kernel(kind):
-    spec = _robot(kind)
+    spec = FAMILIES[kind]()
     t = np.arange(0.0, 0.5, 0.01)
     U = np.zeros((t.size, len(spec.joint_names)))
     U[10:, 0] = 2.0
