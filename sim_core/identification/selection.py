@@ -80,15 +80,15 @@ class Setting:
     ranges: dict[str, FreeParameter] = field(default_factory=dict)
     uncalibrated: dict[str, float] = field(default_factory=dict)
 
-    def budget(self, n_free: int, n_starts: int = 0) -> int:
+    def budget(self, n_free: int, n_starts: int = 0, fits: int = 1) -> int:
         """Simulations one fit may spend: ``max_sims``, or what ranking ``n_starts`` starting points
-        and ``fit_iterations`` forward-difference iterations of ``n_free`` parameters take, whichever is
-        more. A fixed budget starves the fits with many free parameters: a two-parameter effect
+        and ``fit_iterations`` forward-difference iterations of ``n_free`` parameters from each of
+        ``fits`` starts take, whichever is more. A fixed budget starves the fits with many free parameters: a two-parameter effect
         beside a rig's three calibrated nuisances, ranked from 15 starts, had three iterations left
         and stopped a decade short of the leak it was fitting (with 8 it stopped at a third of it, and
         a masked pair stood in). The fits stop on their tolerance (that one after 13 iterations);
         ``fit_iterations`` only keeps a fit that does not converge from running on."""
-        return max(self.max_sims, n_starts + 1 + self.fit_iterations * (n_free + 1))
+        return max(self.max_sims, n_starts + 1 + fits * self.fit_iterations * (n_free + 1))
 
     def before_calibration(self, free: list[FreeParameter], values: list[float]) -> list[float]:
         """``values`` (of ``free``, in order) with the spec's estimated parameters at their values
@@ -149,11 +149,14 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     rest = [fp.get(s0) for fp in free[len(cand.free):]]
     grid = [list(p) + rest for p in cand.grid]
     uncal = st.before_calibration(free[len(cand.free):], rest)
+    second = None
     if uncal != rest:
+        # fitted from the best of these too, whatever the ranking says (oe.fit, second_family)
+        second = len(grid)
         grid += [list(p) + uncal for p in (cand.grid or [[fp.get(s0) for fp in cand.free]])]
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid,
-                 max_sims=st.budget(len(free), len(grid)), uncertainty=False, tol=1e-3,
-                 grid_start_too=bool(accepted) and not cand.existing)
+                 max_sims=st.budget(len(free), len(grid), fits=1 if second is None else 2), uncertainty=False,
+                 tol=1e-3, grid_start_too=bool(accepted) and not cand.existing, second_family=second)
     out = st.val_runner.simulate(res.spec, st.val.n)
     if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
         # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
@@ -548,7 +551,8 @@ def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: 
     uncal = st.before_calibration(free, x0)
     starts = [x0] + ([uncal] if uncal != x0 else [])
     res = oe.fit(st.est_runner, st.est, model, free, grid=starts, grid_problem=st.grid,
-                 max_sims=st.budget(len(free), len(starts)), uncertainty=False, tol=1e-3, side=side)
+                 max_sims=st.budget(len(free), len(starts), fits=len(starts)), uncertainty=False, tol=1e-3,
+                 side=side, second_family=1 if len(starts) > 1 else None)
     if not res.ok or res.spec is None:
         return model, None
     before, after = base.score(model), base.score(res.spec)
