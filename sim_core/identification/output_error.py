@@ -284,10 +284,9 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
     grid start can end in a worse minimum). ``second_family``: the grid points from this index on
     are another family of starts (a rig's nuisances at their values before calibration, the others
     and the current values at the calibrated ones); the best-ranked start of each family is fitted
-    from and the lower cost kept. The ranking window is shorter than the fit's, and a start it
-    prefers can lead into a basin the whole window holds worse: seen, a valve offset fitted from a
-    calibrated 0.43 rad sensor offset stopped at 0.27 rad and 33 % more cost than the fit from the
-    sensor's own zero, and lost to a leak. ``side`` (:class:`.side_by_side.SideBySide`): where the
+    from and the lower cost kept: the ranking window is shorter than the fit's, and the start it
+    prefers can lead into a basin the whole window holds worse (a sensor offset the calibration set
+    to stand in for a valve offset). ``side`` (:class:`.side_by_side.SideBySide`): where the
     uncertainty's Jacobian columns run."""
     spec = spec.copy()
     x0 = np.array([fp.to_x(fp.get(spec)) for fp in free])
@@ -387,8 +386,8 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             if second_family is not None and second_family < len(starts) - 1:
                 # the other family's best: fitted from as well (the current values, last, are the first's)
                 first = list(range(second_family)) + [len(starts) - 1]
-                other = first if i >= second_family and i != len(starts) - 1 else range(second_family, len(starts) - 1)
-                j = min(other, key=lambda k: costs[k])
+                second = range(second_family, len(starts) - 1)
+                j = min(first if i in second else second, key=lambda k: costs[k])
                 if np.isfinite(costs[j]):
                     x_starts.append(profiled(j))
             if grid_start_too and i == len(starts) - 1 and len(first) > 1:
