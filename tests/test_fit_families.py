@@ -53,7 +53,9 @@ class Out:
     ok: bool = True
 
 
-class Runner2:
+class EchoRunner:
+    """'Simulates' a spec by handing its values on to the cost."""
+
     def simulate(self, spec, n=None, owned=False):
         return Out(spec.copy())
 
@@ -80,7 +82,7 @@ class GridWindow:
 def _fit(second_family):
     grid = [[a, CALIBRATED] for a in (-0.5, 0.0, 0.5)] + [[a, 0.0] for a in (-0.5, 0.0, 0.5)]
     spec = Values({EFFECT: 0.0, NUISANCE: CALIBRATED})
-    return oe.fit(Runner2(), WholeWindow(), spec, FREE, grid=grid, grid_problem=GridWindow(), max_sims=400,
+    return oe.fit(EchoRunner(), WholeWindow(), spec, FREE, grid=grid, grid_problem=GridWindow(), max_sims=400,
                   uncertainty=False, tol=1e-8, second_family=second_family)
 
 
@@ -109,7 +111,7 @@ def test_the_second_family_is_fitted_from_where_the_first_ranks_worse_too():
             return np.array([10.0 * s * (s - SHALLOW), 0.1 * (s - SHALLOW), a - TRUE_A])
 
     spec = Values({EFFECT: 0.0, NUISANCE: 0.0})
-    res = oe.fit(Runner2(), Deep(), spec, FREE, grid=grid, grid_problem=Prefers0(), max_sims=400,
+    res = oe.fit(EchoRunner(), Deep(), spec, FREE, grid=grid, grid_problem=Prefers0(), max_sims=400,
                  uncertainty=False, tol=1e-8, second_family=2)
     assert res.values[NUISANCE] == pytest.approx(SHALLOW, abs=1e-3)
 

@@ -86,8 +86,9 @@ class Setting:
         ``fits`` starts take, whichever is more. A fixed budget starves the fits with many free
         parameters: a two-parameter effect beside a rig's three calibrated nuisances, ranked from 15
         starts, had three iterations left and stopped a decade short of the leak it was fitting (with
-        8 it stopped at a third of it, and a masked pair stood in). The fits stop on their tolerance (that one after 13 iterations);
-        ``fit_iterations`` only keeps a fit that does not converge from running on."""
+        8 it stopped at a third of it, and a masked pair stood in). The fits stop on their tolerance
+        (that one after 13 iterations); ``fit_iterations`` only keeps a fit that does not converge
+        from running on."""
         return max(self.max_sims, n_starts + 1 + fits * self.fit_iterations * (n_free + 1))
 
     def before_calibration(self, free: list[FreeParameter], values: list[float]) -> list[float]:
