@@ -64,7 +64,13 @@ TWO = [Case("deadband+sensor_offset", "hydrolek", "j2",
        # a negative null offset beside a hysteresis: round 1 takes a valve asymmetry for the offset, and
        # only beside the hysteresis named in round 2 does the offset explain more (the exchange pass)
        Case("hysteresis+valve_offset", "hydrolek", "j2",
-            [("hysteresis", "j2", {"width": (0.6, 0.72)}), ("valve_offset", "j2", {"offset": (-0.13, -0.09)})])]
+            [("hysteresis", "j2", {"width": (0.6, 0.72)}), ("valve_offset", "j2", {"offset": (-0.13, -0.09)})]),
+       # a leak beside a valve offset: the offset alone wins round 1, fits the angle near its ceiling
+       # and leaves more than 15 % of the chamber pressures' misfit (unexplained); from the leak the
+       # offset follows, and the leak, worth little of the score beside it, is kept because without
+       # it the record is left unexplained
+       Case("leakage+valve_offset", "hydrolek", "j2",
+            [("leakage", "j2", {"internal": (3e-13, 4e-13)}), ("valve_offset", "j2", {"offset": (0.08, 0.12)})])]
 
 
 def draw(case: Case):

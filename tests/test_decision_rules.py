@@ -247,6 +247,57 @@ def test_a_model_misses_the_record_by_its_score_one_channel_or_an_angle_below_ze
     assert not dc.misses_record(fits(80.0, 80.0), 98.0, ceilings, False)      # white residual: noise, not a miss
 
 
+def test_with_the_baseline_a_model_misses_the_record_when_its_effects_leave_most_of_a_pressure_misfit():
+    ceilings = {"j2": {"angle": 99.0, "velocity": 97.0, "pressure": 100.0}}
+    base = {"j2": {"angle": 0.0, "velocity": 70.0, "pressure": 87.0, "score": 52.0}}     # 13 points under
+
+    def fits(pressure):
+        return {"j2": {"angle": 99.0, "velocity": 97.0, "pressure": pressure, "score": (196.0 + pressure) / 3}}
+    # 2.2 points left of the baseline's 13: 83 % closed, under the 85 % asked
+    assert dc.misses_record(fits(97.8), 98.0, ceilings, False, base)
+    assert not dc.misses_record(fits(97.8), 98.0, ceilings, False)            # without the baseline: not judged
+    assert not dc.misses_record(fits(98.5), 98.0, ceilings, False, base)      # 1.5 points left: under the threshold
+    assert not dc.misses_record(fits(97.8), 98.0, ceilings, False, {"j2": {**base["j2"], "pressure": 80.0}})  # 89 %
+
+
+def test_backward_keeps_an_effect_below_the_threshold_without_which_the_model_misses_the_record():
+    short = {A.label: "A", B.label: "B"}
+    scores = {"AB": 90.0, "A": 89.2, "B": 89.2, "": 60.0}      # each effect worth 0.8 points beside the other
+
+    def refit_without(model, ev, rest):
+        m = "".join(sorted(short[e.candidate.label] for e in rest))
+        return m, scores[m]
+
+    def run(misses=None):
+        evs = [scored(A), scored(B)]
+        model, kept = dc.backward(evs, "AB", 90.0, refit_without, misses=misses)
+        return model, [short[e.candidate.label] for e in kept], evs
+    # the model with A alone misses the record (a pressure misfit B closes): B stays, and A goes
+    model, kept, evs = run(misses=lambda m: m == "A")
+    assert (model, kept) == ("B", ["B"])
+    assert not any("backward pass" in r for r in evs[1].reasons) and any("backward pass" in r for r in evs[0].reasons)
+    # without the rule, or when the model with B misses the record too, B goes first
+    assert run()[:2] == ("A", ["A"])
+    assert run(misses=lambda m: True)[:2] == ("A", ["A"])
+
+
+def test_final_check_keeps_an_effect_below_the_threshold_that_the_record_needs():
+    evs = [scored(A), scored(B)]
+    worth = lambda fit, ch: [5.0, 0.8][: len(ch)]
+    chosen, fit = dc.final_check(evs, "m", refit=lambda m, ch: "fit", worth=worth, remove=lambda f, ev: "less",
+                                 needed=lambda fit, i: i == 1)
+    assert chosen == evs and fit == "fit"
+    chosen, fit = dc.final_check([scored(A), scored(B)], "m", refit=lambda m, ch: "fit", worth=worth,
+                                 remove=lambda f, ev: "less", needed=lambda fit, i: False)
+    assert [e.candidate for e in chosen] == [A]
+    # an effect the record needs does not shield a weaker one that it does not
+    evs = [scored(A), scored(B), scored(C)]
+    chosen, fit = dc.final_check(evs, "m", refit=lambda m, ch: "fit",
+                                 worth=lambda fit, ch: [5.0, 0.5, 1.0][: len(ch)], remove=lambda f, ev: "less",
+                                 needed=lambda fit, i: i == 1)
+    assert chosen == evs[:2] and any("final check" in r for r in evs[2].reasons)
+
+
 def test_another_path_is_kept_only_when_it_scores_half_a_point_more():
     greedy, kept, _, state = restarted({frozenset({A.label}): 70.0, frozenset({B.label, C.label}): 70.4})
     assert kept is greedy and state == [A.label]              # the greedy path's state, put back

@@ -377,17 +377,18 @@ def restart(fw: Forward, *, rerun: Callable, score: Callable, misses: Callable |
 
 
 def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_ceilings: dict[str, dict[str, float]],
-                  residual_fails: bool) -> bool:
+                  residual_fails: bool, base_fits: dict[str, dict[str, float]] | None = None) -> bool:
     """Whether a model with these validation fits (joint -> channel -> fit, with its "score") would be
     reported as not explaining the record (:func:`unexplained_reasons`' rules on the fits alone: an
     angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
-    while the residual tests fail)."""
+    while the residual tests fail; with ``base_fits``, the baseline's fits, also a chamber pressure
+    whose misfit the model's effects leave mostly open)."""
     joints = list(fits)
     return bool(unexplained_reasons(
         angle_fits={j: fits[j]["angle"] for j in joints}, score=mean_score(fits), ceiling=ceiling,
         residual_fails=residual_fails,
         channel_fits={j: {c: v for c, v in fits[j].items() if c != "score"} for j in joints},
-        channel_ceilings=channel_ceilings))
+        channel_ceilings=channel_ceilings, base_channel_fits=base_fits))
 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
@@ -559,11 +560,16 @@ def simpler_parameters(accepted: list[Evaluation], model, full: float, *, defaul
 
 
 # ---- backward pass and final check ----------------------------------------------------------------------
-def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None):
+def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None,
+             misses: Callable | None = None):
     """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
     an early pick can be a stand-in for effects named later. ``full``: the score of ``model``;
     ``refit_without(model, ev, rest)`` -> (model without ``ev``, the rest refitted; its score); for the
-    members of a pair named together ``ev`` is the pair's evaluation. Returns (model, accepted)."""
+    members of a pair named together ``ev`` is the pair's evaluation. ``misses(model)``: whether a
+    model would be reported as not explaining the record (:func:`misses_record`); an effect without
+    which the model misses the record, where with it it does not, is kept whatever its points (the
+    score is a mean over channels: a leak that closes the rest of a chamber-pressure misfit is worth
+    little of it, and without it the rest is left unexplained). Returns (model, accepted)."""
     log = log or (lambda msg: None)
     units: list[list[Evaluation]] = []          # a pair named together goes as a unit
     for ev in accepted:
@@ -576,7 +582,10 @@ def backward(accepted: list[Evaluation], model, full: float, refit_without: Call
         what = unit[0].pair or unit[0]          # ``refit_without`` gets the pair's evaluation for a pair
         minus, s = refit_without(model, what, rest)
         drop = full - s
-        if drop < THRESHOLD_POINTS:
+        if drop < THRESHOLD_POINTS and misses is not None and misses(minus) and not misses(model):
+            log(f"backward: kept {what.candidate.label} (removing it costs {drop:.2f} points and leaves the record "
+                f"unexplained)")
+        elif drop < THRESHOLD_POINTS:
             log(f"backward: dropped {what.candidate.label} (removing it costs {drop:.2f} points)")
             for u in unit + ([what] if what is not unit[0] else []):
                 u.reasons.append(f"dropped in the backward pass: removing {'the pair' if len(unit) > 1 else 'it'} "
@@ -585,22 +594,26 @@ def backward(accepted: list[Evaluation], model, full: float, refit_without: Call
     return model, accepted
 
 
-def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Callable, remove: Callable, log=None):
+def final_check(chosen: list[Evaluation], model, *, refit: Callable, worth: Callable, remove: Callable, log=None,
+                needed: Callable | None = None):
     """Every named effect must still be worth the threshold in the refitted final model.
 
     ``refit(model, chosen)`` -> a fit (opaque); ``worth(fit, chosen)`` -> points each effect is worth
     in it (the score with it minus without it); ``remove(fit, ev)`` -> the fitted model without
     ``ev`` (for a member of a pair, ``ev`` is the pair's evaluation: both go). The weakest effect under the threshold is dropped and the rest refitted, until all pass.
-    Returns (chosen, the last fit or None when nothing is left)."""
+    ``needed(fit, i)``: whether without the i-th effect (called after ``worth`` on the same fit) the
+    model would miss the record while with it it does not; such an effect is kept whatever its
+    points, as in :func:`backward`. Returns (chosen, the last fit or None when nothing is left)."""
     log = log or (lambda msg: None)
     chosen = list(chosen)
     fit = None
     while chosen:
         fit = refit(model, chosen)
         w = worth(fit, chosen)
-        k = min(range(len(w)), key=lambda i: w[i])
-        if w[k] >= THRESHOLD_POINTS:
+        short = [i for i in range(len(w)) if w[i] < THRESHOLD_POINTS and not (needed is not None and needed(fit, i))]
+        if not short:
             break
+        k = min(short, key=lambda i: w[i])
         ev = chosen.pop(k)
         ev.reasons.append(f"dropped in the final check: removing it from the refitted model costs only {w[k]:.2f} points")
         log(f"final check: dropped {ev.candidate.label} ({w[k]:.2f} points)")

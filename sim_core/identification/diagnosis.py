@@ -31,8 +31,8 @@ from . import blind_spots, command_null, conditional, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
-from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, recalibration_kept, residual_explained_pct, rivalry,
-                       unexplained_reasons, verdict)
+from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
+                       residual_explained_pct, rivalry, unexplained_reasons, verdict)
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter, free_parameter
 from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
@@ -368,9 +368,17 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # data. A greedy pick whose gain came from refitting the others is dropped here.
         kept: dict = {}
 
+        def misses(out) -> bool:
+            fails = any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())
+            return misses_record(vprob.fits(out), sel.ceiling, sel.channel_ceilings, fails, vprob.fits(kept["base"]))
+
+        def needed(fit, i) -> bool:
+            # the outputs _contributions just simulated: the model's and the model's without each effect
+            return kept["model"] is fit.spec and misses(kept["without"][i]) and not misses(kept["out"])
+
         def checked(accepted, model):
             return final_check(
-                accepted, model, refit=refit, log=log,
+                accepted, model, refit=refit, log=log, needed=needed,
                 worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept),
                 remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate))
 
@@ -556,12 +564,12 @@ def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, p
     """Validation score (points) each chosen effect is worth in ``model``: the score with it minus
     the score with it removed, on the joints it acts on. The simulations run side by side, with the
     baseline's on the first call; ``kept`` keeps the baseline's output ("base") and the model's
-    ("model", "out") for the report."""
+    ("model", "out") for the report, and the model's without each effect ("without")."""
     specs = [model] + [without(base_spec, model, ev.candidate) for ev in chosen]
     outs = side.simulate(runner, specs + ([] if "base" in kept else [base_spec]), prob.n)
     if "base" not in kept:
         kept["base"] = outs.pop()
-    kept["model"], kept["out"] = model, outs[0]
+    kept["model"], kept["out"], kept["without"] = model, outs[0], outs[1:]
     full = prob.fits(outs[0])
     worth = []
     for ev, out in zip(chosen, outs[1:]):

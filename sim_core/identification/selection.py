@@ -410,12 +410,18 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                        score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
                        evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first)
 
+    base_fits: list[dict] = []        # the baseline's validation fits, once a path is judged
+
+    def misses(m):
+        if not base_fits:
+            base_fits.append(st.val.fits(base.outputs(base_spec)))
+        return misses_record(st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m), base_fits[0])
+
     try:
         to_start = snapshot()
         greedy = run()
         fw = restart(greedy, rerun=lambda ev: run((greedy.rounds[0], ev)), score=base.score,
-                     misses=None if misfit is None else (lambda m: misses_record(
-                         st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m))),
+                     misses=None if misfit is None else misses,
                      to_start=to_start, checkpoint=snapshot, log=log)
     finally:
         side.close()
@@ -433,7 +439,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return refits[(id(model), id(ev))][2]
 
-        model, accepted = _backward(accepted, model, base.score(model), refit_without, log)
+        model, accepted = _backward(accepted, model, base.score(model), refit_without, log,
+                                    misses=None if misfit is None else misses)
         if len(accepted) >= 2:
             before = list(accepted)
             model, accepted, tried = exchange(
