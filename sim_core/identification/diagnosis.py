@@ -335,10 +335,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures),
                  ranges={fp.key: fp for fp in pl.free if fp.key in nuisance},
                  uncalibrated={c["parameter"]: c["nominal"] for c in cal.changes if c["parameter"] in nuisance})
+    def misfit(out) -> bool:
+        """Whether a model's residual tests fail on the validation data (``out``: its outputs)."""
+        return any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())
+
     # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
-                 recalibrate=recalibrate, stand_ins=pl.stand_ins, checkpoint=checkpoint,
-                 misfit=lambda out: any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values()))
+                 recalibrate=recalibrate, stand_ins=pl.stand_ins, checkpoint=checkpoint, misfit=misfit)
     if sel.stand_ins:
         # a stand-in took an effect's place: it is a calibration finding, so the baseline is calibrated
         # again with it freed (the model the named effects, if any, and the report compare against)
@@ -369,8 +372,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         kept: dict = {}
 
         def misses(out) -> bool:
-            fails = any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())
-            return misses_record(vprob.fits(out), sel.ceiling, sel.channel_ceilings, fails, vprob.fits(kept["base"]))
+            return misses_record(vprob.fits(out), sel.ceiling, sel.channel_ceilings, misfit(out),
+                                 vprob.fits(kept["base"]))
 
         def needed(fit, i) -> bool:
             # the outputs _contributions just simulated: the model's and the model's without each effect
