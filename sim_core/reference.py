@@ -16,7 +16,8 @@ sensor models are not applied (the reference returns true states).
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import Radau, solve_ivp
+from scipy.integrate._ivp.common import num_jac
 
 from .components.pump import P_S
 from .effects import EFFECTS
@@ -109,16 +110,79 @@ def solve_reference(ctx, times, U, *, method: str = "Radau", rtol: float = 1e-8,
         dy[-1] = dps
         return dy.copy()
 
+    carried = _Carried()
     for k in range(bps.size - 1):
         ta, tb = bps[k], bps[k + 1]
         sel = np.flatnonzero((times > ta) & (times <= tb))
         ueff = vals[k].copy()
-        t_eval = np.append(times[sel][times[sel] < tb], tb)
-        sol = solve_ivp(f, (ta, tb), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, args=(ueff,),
-                        max_step=max_step)
-        if not sol.success:
-            raise RuntimeError(f"reference solver failed at t = {ta:.4f}: {sol.message}")
+        if method == "Radau":
+            ys = _radau_piece(f, ta, tb, y, ueff, times[sel], rtol, atol, max_step, carried)
+        else:
+            t_eval = np.append(times[sel][times[sel] < tb], tb)
+            sol = solve_ivp(f, (ta, tb), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, args=(ueff,),
+                            max_step=max_step)
+            if not sol.success:
+                raise RuntimeError(f"reference solver failed at t = {ta:.4f}: {sol.message}")
+            ys = np.append(sol.y.T[-sel.size:] if sel.size and times[sel][-1] == tb else sol.y.T[:sel.size],
+                           sol.y.T[-1:], axis=0)
         if sel.size:
-            out[sel] = sol.y.T[-sel.size:] if times[sel][-1] == tb else sol.y.T[:sel.size]
-        y = sol.y[:, -1]
+            out[sel] = ys[:sel.size]
+        y = ys[-1]
     return out[:, :n], out
+
+
+class _Carried:
+    """What one constant piece's Radau hands the next: its last step size (s) and Jacobian."""
+
+    def __init__(self):
+        self.h: float | None = None
+        self.J: np.ndarray | None = None
+
+
+def _radau_piece(f, ta, tb, y, ueff, t_out, rtol, atol, max_step, carried: _Carried) -> np.ndarray:
+    """Radau over one constant piece [ta, tb]: the states at ``t_out`` (the record's samples in
+    (ta, tb]) and, last, at ``tb``.
+
+    The command jumps at every breakpoint, so each piece is a new initial value problem, but a fresh
+    solver would start from a tiny step and differentiate the model anew: on 1 ms pieces that was
+    most of the reference's cost. Here the solver starts with the previous piece's last step size and
+    Jacobian; the Jacobian is only Radau's Newton matrix (accuracy is set by its error estimate,
+    unchanged), and when Newton converges slowly Radau asks for a fresh one, differentiated here as
+    scipy does by default."""
+    def fun(t, yy):
+        return f(t, yy, ueff)
+
+    def fun_vectorized(t, Y):
+        return np.stack([fun(t, Y[:, i]) for i in range(Y.shape[1])], axis=1)
+
+    first = [carried.J is not None]
+
+    def jac(t, yy):
+        if first[0]:                # the constructor's request: the last piece's Jacobian
+            first[0] = False
+            return carried.J
+        carried.J, _ = num_jac(fun_vectorized, t, yy, fun(t, yy), atol, None)
+        return carried.J
+
+    span = tb - ta
+    h0 = None if carried.h is None else min(carried.h, span, max_step)
+    solver = Radau(fun, ta, y, tb, rtol=rtol, atol=atol, max_step=max_step, first_step=h0, jac=jac)
+    ys = []
+    i = 0
+    while solver.status == "running":
+        t_old = solver.t
+        msg = solver.step()
+        if solver.status == "failed":
+            raise RuntimeError(f"reference solver failed at t = {t_old:.4f}: {msg}")
+        dense = None
+        while i < t_out.size and t_out[i] <= solver.t:
+            if t_out[i] == solver.t:
+                ys.append(solver.y.copy())
+            else:
+                dense = dense or solver.dense_output()
+                ys.append(dense(t_out[i]))
+            i += 1
+    if solver.h_abs is not None and np.isfinite(solver.h_abs) and solver.h_abs > 0:
+        carried.h = float(solver.h_abs)
+    ys.append(solver.y.copy())
+    return np.array(ys)
