@@ -15,9 +15,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim_core.identification.candidates import confusions
 from sim_core.model.spec import load_robot
 
 DURATION = 30.0      # s per record (the benchmark uses 60 s); 200 Hz, the excite defaults otherwise
+
+
+def confusable_with(*effects: str) -> list[str]:
+    """``effects`` and every effect the catalog (each effect's CONFUSIONS) lists as confusable with one
+    of them, sorted."""
+    out = set(effects)
+    for pair in confusions():
+        if pair & set(effects):
+            out |= pair
+    return sorted(out)
 
 
 @dataclass
@@ -68,9 +79,12 @@ TWO = [Case("deadband+sensor_offset", "hydrolek", "j2",
        # a leak beside a valve offset: the offset alone wins round 1, fits the angle near its ceiling
        # and leaves more than 15 % of the chamber pressures' misfit (unexplained); from the leak the
        # offset follows, and the leak, worth little of the score beside it, is kept because without
-       # it the record is left unexplained
+       # it the record is left unexplained. The bank is narrowed to the two and what the effects'
+       # catalog lists as confusable with either (the search among them is what is tested; the whole
+       # bank on such records is the scored matrix's pair row), which keeps the test to a third.
        Case("leakage+valve_offset", "hydrolek", "j2",
-            [("leakage", "j2", {"internal": (3e-13, 4e-13)}), ("valve_offset", "j2", {"offset": (0.08, 0.12)})])]
+            [("leakage", "j2", {"internal": (3e-13, 4e-13)}), ("valve_offset", "j2", {"offset": (0.08, 0.12)})],
+            options=["--effects", *confusable_with("leakage", "valve_offset")])]
 
 
 def draw(case: Case):
