@@ -123,8 +123,7 @@ def solve_reference(ctx, times, U, *, method: str = "Radau", rtol: float = 1e-8,
                             max_step=max_step)
             if not sol.success:
                 raise RuntimeError(f"reference solver failed at t = {ta:.4f}: {sol.message}")
-            ys = np.append(sol.y.T[-sel.size:] if sel.size and times[sel][-1] == tb else sol.y.T[:sel.size],
-                           sol.y.T[-1:], axis=0)
+            ys = sol.y.T        # the samples in (ta, tb], then tb (the same row when the last sample is tb)
         if sel.size:
             out[sel] = ys[:sel.size]
         y = ys[-1]
@@ -155,11 +154,12 @@ def _radau_piece(f, ta, tb, y, ueff, t_out, rtol, atol, max_step, carried: _Carr
     def fun_vectorized(t, Y):
         return np.stack([fun(t, Y[:, i]) for i in range(Y.shape[1])], axis=1)
 
-    first = [carried.J is not None]
+    reuse = carried.J is not None
 
     def jac(t, yy):
-        if first[0]:                # the constructor's request: the last piece's Jacobian
-            first[0] = False
+        nonlocal reuse
+        if reuse:                   # the constructor's request: the last piece's Jacobian
+            reuse = False
             return carried.J
         carried.J, _ = num_jac(fun_vectorized, t, yy, fun(t, yy), atol, None)
         return carried.J
