@@ -26,6 +26,8 @@ def register(sub):
                    help="where the simulation starts: the record's first readings (auto, data: the default) or the "
                         "robot's initial positions (spec)")
     p.add_argument("--max-simulations", type=int, default=80, help="budget of model simulations (default 80)")
+    p.add_argument("--workers", type=int, default=0, help="processes for the independent simulations (the flow-gain "
+                   "scan, the Jacobian columns; default: CPU count; 1: all in this process; the fit is the same with any)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     add_model_options(p)
     add_reading_options(p)
@@ -44,11 +46,13 @@ def run(args):
 
     if args.max_simulations < 2:
         raise CliError(f"--max-simulations {args.max_simulations}: need at least 2")
+    if args.workers < 0:
+        raise CliError(f"--workers {args.workers}: must be 0 (CPU count) or more")
     spec = load_configured_robot(args)
     opts = options_from_args(args)   # the validation record comes from the same logger: same options
     rec = load_record(args.data, spec, initial_pose=args.initial_pose, options=opts)
     val = load_record(args.validation, spec, initial_pose=args.initial_pose, options=opts) if args.validation else None
-    res = run_fit(spec, rec, args.free, val=val, max_sims=args.max_simulations, out=args.out)
+    res = run_fit(spec, rec, args.free, val=val, max_sims=args.max_simulations, out=args.out, workers=args.workers)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0

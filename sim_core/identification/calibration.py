@@ -287,21 +287,23 @@ SCAN_FACTORS = (0.5, 0.63, 0.8, 0.9, 1.1, 1.25, 1.6, 2.0)
 
 def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None = None, *, span: float = 10.0,
               max_sims: int = 40, uncertainty: bool = True, free: list[FreeParameter] | None = None,
-              why: dict[str, str] | None = None, nominal: dict[str, float] | None = None) -> Calibration:
+              why: dict[str, str] | None = None, nominal: dict[str, float] | None = None,
+              side=None) -> Calibration:
     """Fit ``keys`` (or the ready ``free`` parameters, e.g. a :class:`Plan`'s) of ``spec`` (a model
     spec) on the problem's channels, flow gains from the best point of a coarse scan; then check each
     one's identifiability (see the module docstring), reset those the record cannot identify to
     their nominal values and refit the rest. ``changes`` rows: parameter, nominal, fitted, sigma,
     identified, value (what the calibrated spec holds), unit, why (freed) and, when not identified,
     the reason. ``nominal``: the values a parameter goes back to (default: its value in ``spec``, where
-    the fit also starts)."""
+    the fit also starts). ``side`` (:class:`.side_by_side.SideBySide`): where the scan's simulations
+    and the fits' Jacobian columns run (the same simulations, so the same calibration)."""
     if free is None:
         free = [free_parameter(spec, k, span=span) for k in keys or []]
     keys = [fp.key for fp in free]
     nominal = {fp.key: (nominal[fp.key] if nominal and fp.key in nominal else fp.get(spec)) for fp in free}
-    start = scan_flow_gains(spec, runner, problem, keys)
+    start = scan_flow_gains(spec, runner, problem, keys, side)
     budget = max_sims + 4 * max(0, len(free) - len([k for k in keys if is_baseline(k)]))
-    res = oe.fit(runner, problem, start, free, max_sims=budget, uncertainty=uncertainty)
+    res = oe.fit(runner, problem, start, free, max_sims=budget, uncertainty=uncertainty, side=side)
     if not uncertainty or not res.ok:
         changes = [_row(fp, nominal, res, res, None, why) for fp in free]
         return Calibration(res.spec, res, free, changes)
@@ -311,7 +313,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
         reset = spec.copy()
         for fp in free:
             fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
-        return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True)
+        return oe.fit(runner, problem, reset, keep, max_sims=budget, uncertainty=True, side=side)
 
     protected: dict[str, str] = {}
     keep, current, dropped = eliminate(free, res, identifiability, refit, keep_rank, last=is_baseline,
@@ -329,7 +331,7 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     mark_kept(changes, protected)
     if keep and dropped:
         mark_elasticities(changes, conditional.elasticities(final, [fp for fp in free if fp.key in dropped],
-                                                            runner, problem))
+                                                            runner, problem, side))
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
@@ -463,27 +465,34 @@ def _row(fp: FreeParameter, nominal: dict, first: oe.FitResult, final: oe.FitRes
     return row
 
 
-def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str]):
+def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str], side=None):
     """``spec`` with each flow gain among ``keys`` moved to the best of ``SCAN_FACTORS`` x its value
     (one joint after the other). Along a flow gain the output-error cost is jagged wherever
     stick-slip, a deadband crossing or end-stop contact switches on or off; a finite-difference
     gradient there is noise and least squares from the nominal value can stall far from the valley
-    (seen: a cost 6x the scan's best after 40 simulations)."""
-    def cost(s) -> float:
-        r = problem.residuals(runner.simulate(s, problem.n))
-        return float(r @ r)
+    (seen: a cost 6x the scan's best after 40 simulations). One joint's factors are independent
+    simulations: side by side when ``side`` (:class:`.side_by_side.SideBySide`) is given."""
+    def costs(specs) -> list[float]:
+        outs = side.simulate(runner, specs, problem.n) if side is not None else [runner.simulate(s, problem.n)
+                                                                                 for s in specs]
+        return [float(r @ r) for r in map(problem.residuals, outs)]
 
     best_spec = spec.copy()
-    best = cost(best_spec)
+    best = None
     for key in keys:
         if not is_baseline(key):
             continue
         v0 = best_spec.get(key)
         best_v = v0
+        trials = []
         for f in SCAN_FACTORS:
             trial = best_spec.copy()
             trial.set(key, v0 * f)
-            c = cost(trial)
+            trials.append(trial)
+        found = costs(([best_spec] if best is None else []) + trials)
+        if best is None:
+            best, found = found[0], found[1:]
+        for f, c in zip(SCAN_FACTORS, found):
             if c < best:
                 best, best_v = c, v0 * f
         best_spec.set(key, best_v)

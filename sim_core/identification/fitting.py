@@ -19,6 +19,7 @@ from .metrics import noise_std
 from .parameters import FreeParameter, FreeParameterError, declared, free_parameter
 from ..params_file import overrides, write_params
 from .record import Record, check_record
+from .side_by_side import SideBySide
 from .simulation import Runner, choose_numerics, model_spec
 
 NOISE_DRAWS = 16
@@ -82,11 +83,19 @@ def _narrowed(fp: FreeParameter, v: float, span: float) -> FreeParameter:
 
 
 def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = None, max_sims: int = 80,
-            out: str | None = None) -> dict:
+            out: str | None = None, workers: int = 0) -> dict:
     """Fit ``keys`` (default: the baseline calibration's plan, see calibration.py) and check each
     one's identifiability: a parameter the record does not identify is reported and written at its
     nominal value, the others refitted without it (which go, and when: elimination.py, as the
-    baseline calibration of ``diagnose`` does)."""
+    baseline calibration of ``diagnose`` does). Independent simulations (the flow-gain scan, the
+    Jacobian columns) run side by side in ``workers`` processes (0: one per CPU; the result is the
+    same with any number)."""
+    with SideBySide(workers) as side:
+        return _run_fit(spec, rec, keys, val=val, max_sims=max_sims, out=out, side=side)
+
+
+def _run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None, max_sims: int, out: str | None,
+             side: SideBySide) -> dict:
     spec = spec.copy()
     if keys:
         keys = list(keys)
@@ -107,11 +116,11 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     check_record(rec, spec)            # what the record shows that no parameter can fit goes to its notes
     prob = oe.Problem(rec, targets)
     fast, numerics = choose_numerics(m0, rec)
-    start = scan_flow_gains(m0, fast, prob, keys)      # least squares stalls on a jagged cost
-    res = oe.fit(fast, prob, start, free, max_sims=max_sims, uncertainty=False)
+    start = scan_flow_gains(m0, fast, prob, keys, side)      # least squares stalls on a jagged cost
+    res = oe.fit(fast, prob, start, free, max_sims=max_sims, uncertainty=False, side=side)
     accurate = Runner(rec)
     polish = [_narrowed(fp, res.values[fp.key], 1.5) if fp.log else fp for fp in free]
-    final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3)
+    final = oe.fit(accurate, prob, res.spec, polish, max_sims=4 * (len(keys) + 1), tol=1e-3, side=side)
     fitted = final
     dropped: dict[str, tuple[str, oe.FitResult]] = {}
     protected: dict[str, str] = {}
@@ -122,7 +131,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
             reset = fitted.spec.copy()
             for fp in polish:
                 fp.apply(reset, current.values[fp.key] if fp in keep else nominal[fp.key])
-            out = oe.fit(accurate, prob, reset, keep, max_sims=2 * (len(keep) + 1) + 4, tol=1e-3)
+            out = oe.fit(accurate, prob, reset, keep, max_sims=2 * (len(keep) + 1) + 4, tol=1e-3, side=side)
             refits[0] += out.sims
             return out
 
@@ -134,8 +143,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
                 fp.apply(reset, nominal[fp.key])
             final = oe.FitResult([], {}, final.cost, spec=reset, sims=0)
     verdict = {k: dropped[k][0] if k in dropped else None for k in keys}
-    before = accurate.simulate(m0)
-    after = accurate.simulate(final.spec)
+    before, after = side.simulate(accurate, [m0, final.spec])
     result = {
         "robot": spec.name, "source": rec.source, "simulations": res.sims + fitted.sims + refits[0],
         "numerics": numerics, "switched_on": switched,
@@ -149,7 +157,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
         result["notes"] += [f"{val.source}: {n}" for n in val.notes]
         vprob = oe.Problem(val, targets)
         vr = Runner(val)
-        result["fit"][val.source] = _fits(vprob, vr.simulate(m0), vr.simulate(final.spec), val)
+        result["fit"][val.source] = _fits(vprob, *side.simulate(vr, [m0, final.spec]), val)
     changes = []
     for fp, k in zip(polish, keys):
         ok = verdict[k] is None
@@ -171,7 +179,7 @@ def run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None = N
     mark_kept(changes, protected)
     reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
     if reset_keys and final.free:
-        mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob))
+        mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob, side))
         for row in changes:
             if "elasticity_to_held" in row:
                 result["parameters"][row["parameter"]]["elasticity_to_held"] = row["elasticity_to_held"]

@@ -92,6 +92,7 @@ class Table:
             c = Column(self.key, owner, s.symbol, s.unit, s.doc, self._size, s.size, s.ode, s.atol)
             self.columns.append(c)
             self._size += s.size
+            _DECLARED[0] += 1
             setattr(module, name, c.index)
             setattr(module, f"{self.key}_N", self._size)
             out.append(c.index)
@@ -106,6 +107,9 @@ class Table:
     def owned_by(self, owner: str) -> list[Column]:
         return [c for c in self.columns if c.owner == owner]
 
+
+_DECLARED = [0]              # columns declared so far, in every table
+_FINGERPRINT: list = [None, ""]  # ((TABLES, _DECLARED) when hashed, the hash)
 
 AP = Table("AP", "actuator", "actuator parameters (command chain, valve, actuator, hose, sensor, effects, faults)")
 DP = Table("DP", "joint", "per-joint mechanical parameters")
@@ -205,13 +209,19 @@ def check() -> None:
 
 
 def fingerprint() -> str:
-    """Changes whenever any column of any table is added, moved or resized."""
+    """Changes whenever any column of any table is added, moved or resized. Columns are only ever
+    appended (frozen, never removed), so the hash is kept until the next declaration (or another set
+    of tables): every simulation asks for it (``kernel.compose.kernel``), and hashing every column
+    anew cost about 0.15 ms, 1-2 % of a simulation of a 60 s, 50 Hz record."""
     _load_owners()
+    if _FINGERPRINT[0] == (TABLES, _DECLARED[0]):
+        return _FINGERPRINT[1]
     h = hashlib.sha256()
     for t in TABLES:
         for c in t.columns:
             h.update(f"{c.name}:{c.index}:{c.size}:{int(c.ode)};".encode())
-    return h.hexdigest()[:16]
+    _FINGERPRINT[:] = [(TABLES, _DECLARED[0]), h.hexdigest()[:16]]
+    return _FINGERPRINT[1]
 
 
 def describe() -> list[dict]:
