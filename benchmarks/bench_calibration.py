@@ -12,8 +12,10 @@ Records: ``rig new cylinder`` and ``rig new boom`` under closed-loop P control (
 ``tests/rig_records.py``: 60 s at 50 Hz, jittered time, nominal parameters off, a hidden 4 % leak), and
 60 s of HydroLek's shoulder at 200 Hz with a hidden deadband (one flow gain free: only the scan runs side
 by side there). The two ways alternate, ``--repeats`` times each; the medians and their ratio are printed.
+Then the same for ``hydrohil fit``'s whole run (``run_fit``, ``--workers 1`` against the default), whose
+polish and refits simulate at the default integrator step (ten times longer simulations).
 
-    .venv/bin/python benchmarks/bench_calibration.py [--repeats 5] [--workers 0] [--json]
+    .venv/bin/python benchmarks/bench_calibration.py [--repeats 5] [--fit-repeats 3] [--workers 0] [--json]
 """
 
 import argparse
@@ -34,6 +36,7 @@ from rig_records import closed_loop_record, write_headerless  # noqa: E402
 from sim_core.identification import output_error as oe  # noqa: E402
 from sim_core.identification.calibration import calibrate, plan  # noqa: E402
 from sim_core.identification.candidates import actuator_scales  # noqa: E402
+from sim_core.identification.fitting import run_fit  # noqa: E402
 from sim_core.identification.record import ESTIMATION_SHARE, load_record  # noqa: E402
 from sim_core.identification.side_by_side import SideBySide  # noqa: E402
 from sim_core.identification.simulation import choose_numerics, model_spec  # noqa: E402
@@ -71,7 +74,7 @@ def hydrolek_record(tmp: Path):
     return spec, load_record(tmp / "hl.csv", spec)
 
 
-def measure(spec, rec, repeats: int, workers: int) -> dict:
+def measure(spec, rec, repeats: int, workers: int, fit_repeats: int) -> dict:
     m0 = model_spec(spec)
     pl = plan(m0, rec)
     est = oe.Problem(rec, rec.targets, n=int(rec.n * ESTIMATION_SHARE))
@@ -93,15 +96,29 @@ def measure(spec, rec, repeats: int, workers: int) -> dict:
             elif cal.changes != ref:
                 raise SystemExit(f"{spec.name}: the calibration {way} differs from the first one")
     serial, side = statistics.median(times["one process"]), statistics.median(times["side by side"])
+    fits = {"one process": [], "side by side": []}
+    ref_fit = None
+    for _ in range(fit_repeats):
+        for way in fits:
+            t0 = time.perf_counter()
+            res = run_fit(spec, rec, None, workers=1 if way == "one process" else workers)
+            fits[way].append(time.perf_counter() - t0)
+            ref_fit = ref_fit or res["parameters"]
+            if res["parameters"] != ref_fit:
+                raise SystemExit(f"{spec.name}: hydrohil fit {way} differs from the first one")
+    fit_serial = statistics.median(fits["one process"]) if fit_repeats else float("nan")
+    fit_side = statistics.median(fits["side by side"]) if fit_repeats else float("nan")
     return {"free": len(pl.free), "one_process_s": serial, "side_by_side_s": side, "ratio": side / serial,
             "identified": [c["parameter"] for c in ref if c["identified"]], "same_calibration": True,
-            "all_s": times}
+            "fit_one_process_s": fit_serial, "fit_side_by_side_s": fit_side, "fit_ratio": fit_side / fit_serial,
+            "all_s": times, "fit_all_s": fits}
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--workers", type=int, default=0, help="side-by-side processes (0: CPU count)")
+    ap.add_argument("--fit-repeats", type=int, default=3, help="runs of hydrohil fit's whole calibration each way")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_calibration_"))
@@ -112,14 +129,16 @@ def main():
     results = {"cpus": os.cpu_count(), "load_average_1min": load, "cases": {}}
     for name, make in cases.items():
         spec, rec = make()
-        results["cases"][name] = measure(spec, rec, args.repeats, args.workers)
+        results["cases"][name] = measure(spec, rec, args.repeats, args.workers, args.fit_repeats)
     if args.json:
         print(json.dumps(results, indent=2))
         return
     print(f"{results['cpus']} CPUs, load average {load:.2f}; medians of {args.repeats} alternating runs")
-    print(f"{'record':<40} {'free':>4} {'one process':>12} {'side by side':>13} {'ratio':>6}  identified")
+    print(f"{'record':<40} {'free':>4} {'calibrate: one process':>23} {'side by side':>13} {'ratio':>6}"
+          f" {'fit: one process':>17} {'side by side':>13} {'ratio':>6}  identified")
     for name, r in results["cases"].items():
-        print(f"{name:<40} {r['free']:4d} {r['one_process_s']:11.2f}s {r['side_by_side_s']:12.2f}s {r['ratio']:6.2f}  "
+        print(f"{name:<40} {r['free']:4d} {r['one_process_s']:22.2f}s {r['side_by_side_s']:12.2f}s {r['ratio']:6.2f}"
+              f" {r['fit_one_process_s']:16.2f}s {r['fit_side_by_side_s']:12.2f}s {r['fit_ratio']:6.2f}  "
               f"{', '.join(r['identified'])}")
 
 
