@@ -71,6 +71,14 @@ def test_fit_bad_free_parameters(cli, record, tmp_path, free, needle):
     assert not (tmp_path / "p.toml").exists()
 
 
+def test_fit_refuses_a_negative_worker_count(cli, record, tmp_path):
+    proc = cli("fit", "--robot", "hydrolek", record / "meas.csv", "--workers", "-1", "--out", tmp_path / "p.toml")
+    assert proc.returncode == 2
+    assert "hydrohil fit: error:" in proc.stderr and "--workers -1" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "p.toml").exists()
+
+
 def test_fit_effect_parameter_of_a_nominal_effect(cli, tmp_path):
     """The harvester's deadband is part of its model: its width can be calibrated like the pots."""
     cli("excite", "--robot", "harvester", "--joint", "boom", "--duration", 20, "--seed", 3, "--out", tmp_path / "in.csv", check=True)
