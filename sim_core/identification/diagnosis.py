@@ -280,7 +280,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 tries = []
                 for k in newly:
                     held = calibrate_(model, fast, est, free=[fp for fp in pl.free if fp.key != k], why=pl.why,
-                                     nominal=uncalibrated)
+                                      nominal=uncalibrated)
                     tries.append((score(held.spec), k, held))
                 kept = [t for t in tries if recalibration_kept(before, t[0]) and any(i in pending for i in t[2].identified)]
                 if not kept:
