@@ -31,11 +31,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))     # the record generator the tests use
 
+from bench_rig_diagnosis import hidden_params  # noqa: E402   (the leak the rig benchmark hides: 4 % of full flow)
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.identification import output_error as oe  # noqa: E402
 from sim_core.identification.calibration import calibrate, plan  # noqa: E402
-from sim_core.identification.candidates import actuator_scales  # noqa: E402
 from sim_core.identification.fitting import run_fit  # noqa: E402
 from sim_core.identification.record import ESTIMATION_SHARE, load_record  # noqa: E402
 from sim_core.identification.side_by_side import SideBySide  # noqa: E402
@@ -55,8 +55,7 @@ def rig_record(tmp: Path, template: str):
     spec = load_robot(work / "rig")
     joint = spec.joint_names[0]
     i = spec.tree.index(spec.joint(joint).dof)
-    sc = actuator_scales(spec, joint)
-    rows, _ = closed_loop_record(work / "rig", hidden=("leakage", {"internal": 0.04 * sc["q_full"] / spec.supply["pressure"]}),
+    rows, _ = closed_loop_record(work / "rig", hidden=("leakage", hidden_params("leakage", spec, joint)),
                                  off={f"joints.{joint}.valve.rated_flow": 1.2, "supply.pressure": 0.85}, seed=1,
                                  start_offset=0.05 * float(spec.tree.upper[i] - spec.tree.lower[i]))
     write_headerless(rows, work / "log.csv")

@@ -472,10 +472,8 @@ def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str], 
     gradient there is noise and least squares from the nominal value can stall far from the valley
     (seen: a cost 6x the scan's best after 40 simulations). One joint's factors are independent
     simulations: side by side when ``side`` (:class:`.side_by_side.SideBySide`) is given."""
-    def costs(specs) -> list[float]:
-        outs = side.simulate(runner, specs, problem.n) if side is not None else [runner.simulate(s, problem.n)
-                                                                                 for s in specs]
-        return [float(r @ r) for r in map(problem.residuals, outs)]
+    def costs(specs) -> list[float]:      # each spec the caller's own copy
+        return [float(r @ r) for r in map(problem.residuals, oe._simulate_all(runner, specs, problem.n, side))]
 
     best_spec = spec.copy()
     best = None
@@ -489,7 +487,7 @@ def scan_flow_gains(spec, runner: Runner, problem: oe.Problem, keys: list[str], 
             trial = best_spec.copy()
             trial.set(key, v0 * f)
             trials.append(trial)
-        found = costs(([best_spec] if best is None else []) + trials)
+        found = costs(([best_spec.copy()] if best is None else []) + trials)
         if best is None:
             best, found = found[0], found[1:]
         for f, c in zip(SCAN_FACTORS, found):

@@ -216,13 +216,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if not fast.simulate(m0, est.n).ok:
         raise ValueError(f"{rec.source}: the {spec.name} model cannot be simulated on this record's input (the state "
                          f"diverged); check the columns against the robot ({', '.join(rec.targets)})")
-    def calibrate_(*args, **kw):
+    def calibrate_side_by_side(*args, **kw):
         """``calibration.calibrate`` with its independent simulations side by side (a rig frees half a
         dozen parameters, each a Jacobian column, while the other core would idle)."""
         with SideBySide(workers if backend is None else 1) as side:
             return calibrate(*args, side=side, **kw)
 
-    cal = calibrate_(m0, fast, est, free=pl.free, why=pl.why)
+    cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
     if fast.substep is not None and not vfast.simulate(base_fast, vprob.n).ok:
@@ -264,7 +264,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # started where the baseline ended; a parameter this calibration cannot identify goes back to
         # the spec's value, not to the baseline's: that may have stood in for the effect now in the
         # model (a 0.3 rad sensor offset for a valve offset)
-        again = calibrate_(model, fast, est, free=pl.free, why=pl.why, nominal=uncalibrated)
+        again = calibrate_side_by_side(model, fast, est, free=pl.free, why=pl.why, nominal=uncalibrated)
         newly = [k for k in again.identified if k in pending]
         entry = {"after": ev.candidate.label, "identified": again.identified, "newly_identified": newly,
                  "changes": again.changes}
@@ -279,8 +279,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 # in turn held where it is, the best of those that keep the score
                 tries = []
                 for k in newly:
-                    held = calibrate_(model, fast, est, free=[fp for fp in pl.free if fp.key != k], why=pl.why,
-                                      nominal=uncalibrated)
+                    held = calibrate_side_by_side(model, fast, est, free=[fp for fp in pl.free if fp.key != k],
+                                                  why=pl.why, nominal=uncalibrated)
                     tries.append((score(held.spec), k, held))
                 kept = [t for t in tries if recalibration_kept(before, t[0]) and any(i in pending for i in t[2].identified)]
                 if not kept:
@@ -358,7 +358,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                            f"record as well ({s_with - s_effect:+.2f} points)")
             pl.held.pop(fp.key, None)
         pl.free, pl.why = pl.free + extra, why
-        cal = calibrate_(m0, fast, est, free=pl.free, why=pl.why)
+        cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
         base_fast = cal.spec
         keys[:] = refit_keys(cal.identified)
     timings["selection"] = time.perf_counter() - t_start
