@@ -452,6 +452,72 @@ def test_the_pair_search_skipped_at_the_ceiling_runs_once_the_final_check_drops_
     assert len(asked) == 1 and asked[0][2] == 1
 
 
+# ---- a candidate that explains a record the model misses, below the 2-point floor -------------------------
+def short_of_floor(c, gain, spread=0.01, bic=-10.0, sigma=0.1):
+    """A judged Evaluation that fails (at most) the 2-point floor."""
+    return judged(scored(c, gain=gain, spread=spread, bic=bic, sigma=sigma))
+
+
+def test_a_candidate_that_closes_most_of_a_missed_record_is_named_below_the_floor():
+    """The model is 2.2 points under its ceiling with failing residual tests: a leak gaining 1.99
+    points whose model passes the tests explains it; the largest such gain is named."""
+    leak, offset = short_of_floor(A, 1.99), short_of_floor(B, 1.90)
+    assert leak.short_of_floor and not leak.accepted_ok
+    best = dc.best_explaining([offset, leak], score=97.8, ceiling=100.0, explains=lambda e: True)
+    assert best is leak and leak.accepted_ok and "below the 2-point floor" in leak.explains_record
+    assert not offset.accepted_ok and offset.explains_record is None
+
+
+@pytest.mark.parametrize("why", ["residual tests still fail", "closes too little", "fails another rule",
+                                 "the noise spread sets the bar"])
+def test_below_the_floor_only_a_candidate_that_explains_the_record_by_every_other_rule(why):
+    if why == "residual tests still fail":
+        ev, explains = short_of_floor(A, 1.99), lambda e: False
+    elif why == "closes too little":            # 1.5 of 2.2 points is 68 %, under the 85 % share
+        ev, explains = short_of_floor(A, 1.5), lambda e: True
+    elif why == "fails another rule":
+        ev, explains = short_of_floor(A, 1.99, bic=+3.0), lambda e: True
+    else:                                       # 3 x 0.7 = 2.1 points: the gain is within the noise
+        ev, explains = short_of_floor(A, 1.99, spread=0.7), lambda e: True
+    assert dc.best_explaining([ev], score=97.8, ceiling=100.0, explains=explains) is None
+    assert not ev.accepted_ok and ev.explains_record is None
+
+
+def explaining_forward(misfit=True, score=97.8, explains=lambda e: True):
+    """forward() where no single passes the floor, A gains 1.99 (its model passes the residual tests
+    per ``explains``), and any pair would pass."""
+    asked = []
+
+    def evaluate_round(pool, model, accepted, r):
+        return [short_of_floor(c, 1.99 if c is A else 0.3) for c in pool]
+
+    def evaluate_pairs(pairs, model, accepted, r):
+        asked.append(len(pairs))
+        return [judged(scored_pair(a.candidate, b.candidate, gain=6.0)) for a, b in pairs]
+
+    fw = dc.forward([A, B, C], frozenset(), evaluate_round=evaluate_round,
+                    extend=lambda m, ev: m | {c.label for c in getattr(ev.candidate, "members", [ev.candidate])},
+                    score=lambda m: score if not m else 99.9, ceiling=100.0, evaluate_pairs=evaluate_pairs,
+                    misfit=lambda m: misfit, explains=explains)
+    return fw, asked
+
+
+def test_forward_names_the_explaining_single_before_any_pair_search():
+    fw, asked = explaining_forward()
+    assert [e.candidate.label for e in fw.accepted] == [A.label] and fw.accepted[0].pair is None
+    assert asked == [] and fw.accepted[0].explains_record
+    assert fw.at_ceiling     # with it the model is at its ceiling: the search stops there
+
+
+def test_forward_below_the_floor_names_nothing_where_the_record_is_not_missed_or_nothing_explains_it():
+    fw, asked = explaining_forward(misfit=False)            # a white residual: nothing to explain
+    assert fw.accepted == [] and asked == []
+    fw, asked = explaining_forward(score=98.5)              # within the floor of the ceiling already
+    assert fw.accepted == [] and asked == []
+    fw, asked = explaining_forward(explains=lambda e: False)  # no single explains it: the pairs are tried
+    assert asked == [3] and len(fw.accepted) == 2 and fw.accepted[0].pair is not None
+
+
 # ---- a named effect's parameters ----------------------------------------------------------------------
 LEAK = cand("leakage", "swing", (("internal", 1e-15, 3e-10, 0.0), ("external", 1e-16, 1e-10, 0.0)))
 K_INT, K_EXT = (fp.key for fp in LEAK.free)

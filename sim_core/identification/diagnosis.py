@@ -436,6 +436,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "bic_delta": _num(ev.bic_delta), "noise_spread": round(ev.spread, 4),
                 "significance": {fp.key.split(".")[-1]: _num(ev.significance.get(fp.key, 0.0)) for fp in c.free},
                 "refit_of_nominal": c.existing, "round": ev.round}
+        if ev.explains_record:
+            item["explains_record"] = ev.explains_record
         if ev.held_at_default:
             item["held_at_default"] = {name: {"value": v, "because": HELD_BECAUSE} for name, v in ev.held_at_default.items()}
         if elasticity:

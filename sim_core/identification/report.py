@@ -322,6 +322,8 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
         gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
         parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b>{_share(s)} ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
                      f"BIC change {_fmt(s['bic_delta'])}." + (" Refit of an effect the nominal model already has." if s["refit_of_nominal"] else "") + "</p>")
+        if s.get("explains_record"):
+            parts.append(f"<p><b>Below the floor</b>: {e(s['explains_record'])}.</p>")
         if "named_together_with" in s:
             o, alone = s["named_together_with"], s.get("alone", {})
             parts.append(f"<p><b>Named together with {e(o['effect'])}{' on ' + e(o['joint']) if o['joint'] else ''}</b>: "
@@ -564,6 +566,8 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
         lines += [f"- {k} {h['because']}" for k, h in s.get("held_at_default", {}).items()]
         lines += [f"- {line}" for line in conditional.describe(s)]
         lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
+        if s.get("explains_record"):
+            lines.append(f"- {s['explains_record']}")
         if "named_together_with" in s:
             o = s["named_together_with"]
             lines.append(f"- named together with {o['effect']}" + (f" on {o['joint']}" if o["joint"] else "")

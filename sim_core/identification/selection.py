@@ -405,17 +405,29 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 
     model_misfit = None if misfit is None else (lambda model: misfit(base.outputs(model)))
 
+    base_fits: list[dict] = []        # the baseline's validation fits, once a path is judged
+
+    def baseline_fits():
+        if not base_fits:
+            base_fits.append(st.val.fits(base.outputs(base_spec)))
+        return base_fits[0]
+
+    def misses(m):
+        return misses_record(st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m), baseline_fits())
+
+    def explains(ev):
+        """Whether the model with ``ev`` (its validation outputs) passes the residual tests and does
+        not miss the record."""
+        out = ev.outputs
+        if out is None or not out.ok or misfit(out):
+            return False
+        return not misses_record(ev.fits, ceiling, ceilings, False, baseline_fits())
+
     def run(first=None):
         return forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
                        score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
-                       evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first)
-
-    base_fits: list[dict] = []        # the baseline's validation fits, once a path is judged
-
-    def misses(m):
-        if not base_fits:
-            base_fits.append(st.val.fits(base.outputs(base_spec)))
-        return misses_record(st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m), base_fits[0])
+                       evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first,
+                       explains=None if misfit is None else explains)
 
     try:
         to_start = snapshot()
