@@ -16,6 +16,9 @@ The rules, in the order they apply:
 * forward selection (:func:`forward`): each round every remaining candidate is refitted with what
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
   when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
+* below the floor (:func:`best_explaining`): when nothing passes while the model misses the record
+  (more than 2 points under its noise ceiling, residual tests failing), a candidate that fails only
+  the 2-point floor, closes 85 % of the distance to the ceiling and whitens the residual joins;
 * masked pairs (:func:`rank_pairs`, :func:`forward`): when no single candidate passes but the model's
   residual tests fail, the most promising pairs (by the sum of their single validation gains and,
   taking turns, by the sum of their estimation-fit improvements; at most 15) are fitted jointly; a pair that passes (each member identified) joins as two effects named together;
