@@ -90,19 +90,17 @@ def _log(tmp_path, bench: Bench, textbook_rig: Rig, seed: int):
     return ("--no-header", "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2")
 
 
-# (textbook cause, its rig, seed) -> the effect the diagnosis must name and its parameter's truth
+# (textbook cause, its rig, seed) -> the effect the diagnosis must name and its parameter's truth;
+# one case per cause, the boom's beside a second cause or a harder clean record
+# (benchmarks/bench_textbook_rig.py draws every cause on every rig)
 HIDDEN = {
     "clean": ({}, "hanging", 1, None),
-    "clean_boom": ({}, "boom", 2, None),
     # the tip load twice the spec's and the supply 13 % low: alone the load would need more than its range
     "clean_boom_heavy": (dict(rated_flow=3.6e-4, supply=1.212e7, load_mass=76.75, viscous=10330.0), "boom", 2, None),
     "overlap": ({"overlap": 0.07}, "vertical", 2, ("deadband", "width", 0.07 / SPOOL_GAIN_PER_VOLT)),
-    "overlap_boom": ({"overlap": 0.1}, "boom", 1, ("deadband", "width", 0.1 / SPOOL_GAIN_PER_VOLT)),
     "weaker_retract_edges": ({"negative_flow_ratio": 0.7}, "hanging", 3, ("valve_asymmetry", "ratio", 0.7)),
-    "stronger_retract_edges": ({"negative_flow_ratio": 1.3}, "vertical", 1, ("valve_asymmetry", "ratio", 1.3)),
     "piston_leak": ({"piston_leakage": 3e-12}, "hanging", 2, ("leakage", "internal", 3e-12)),
     "bus_delay": ({"command_delay": 0.05}, "vertical", 3, ("delay", "delay", 0.05)),
-    "bus_delay_boom": ({"command_delay": 0.06}, "boom", 3, ("delay", "delay", 0.06)),
     "null_bias": ({"null_bias": -0.02}, "hanging", 1, ("valve_offset", "offset", -0.02 / SPOOL_GAIN_PER_VOLT)),
     "small_pump": ({"pump_flow": 1.1e-4}, "vertical", 2, ("pump_limit", "max_flow", 1.1e-4)),
     # two causes at once: beside stronger retract edges an overlap alone makes the model worse
