@@ -483,7 +483,7 @@ def run_case(case: dict, work: Path) -> dict:
             if e and case["robot"] == "rig":
                 # as the calibration's: corrected with the elasticities the report gives to the rig's
                 # true values of what was held (a figure beside the score, not the score)
-                out["error_given_true_held_pct"] = round(100 * abs(conditional.corrected(got, e, rig_off(joint)) / p[key] - 1.0), 2)
+                out["error_given_true_held_pct"] = held_corrected_error_pct(got, e, p[key], joint)
     elif case["group"] == "clean":
         out["right"] = d["verdict"] == "no_significant_discrepancy"
     else:
@@ -518,9 +518,20 @@ def calibration_finding(d: dict, case: dict, joint: str) -> dict | None:
     if truth and ch.get("elasticity_to_held"):
         # the value corrected with its elasticities to what was held at nominal, given the truth's
         # values of those (a figure beside the score, not the score)
-        corrected = conditional.corrected(fitted, ch["elasticity_to_held"], rig_off(joint))
-        out["error_given_true_held_pct"] = round(100 * abs(corrected / truth - 1.0), 2)
+        out["error_given_true_held_pct"] = held_corrected_error_pct(fitted, ch["elasticity_to_held"], truth, joint)
     return out
+
+
+def held_corrected_error_pct(value: float, elasticity: dict[str, float], truth: float, joint: str) -> float:
+    """The error (%) of ``value`` once corrected with its elasticities (% per %) to the rig's true
+    values of what the calibration held at nominal (:func:`rig_off`)."""
+    return round(100 * abs(conditional.corrected(value, elasticity, rig_off(joint)) / truth - 1.0), 2)
+
+
+def held_corrected(r: dict) -> float | None:
+    """A record's error corrected to the true held values, a named effect's or a calibration's;
+    None where its value hangs on nothing held."""
+    return r.get("error_given_true_held_pct", (r.get("calibration") or {}).get("error_given_true_held_pct"))
 
 
 def visible_trace(r: dict) -> bool:
@@ -532,7 +543,7 @@ def given_true_held(r: dict) -> float:
     """A right single's parameter error (%) once its value is corrected, with the elasticities the
     report gives, to the truth's values of the parameters the calibration held at nominal (the rig's
     supply); the error itself where the value hangs on nothing held."""
-    e = r.get("error_given_true_held_pct", (r.get("calibration") or {}).get("error_given_true_held_pct"))
+    e = held_corrected(r)
     return r["param_error_pct"] if e is None else e
 
 
@@ -600,14 +611,12 @@ def main() -> int:
             continue
         named = ", ".join(f"{e}@{j}" for e, j in r["named"]) or r["verdict"]
         err = "" if r["param_error_pct"] is None else f" err {r['param_error_pct']:.1f} %"
-        if r.get("error_given_true_held_pct") is not None:
-            err += f", {r['error_given_true_held_pct']:.1f} % corrected to the true held values"
+        if held_corrected(r) is not None:
+            err += f", {held_corrected(r):.1f} % corrected to the true held values"
         if "trace_rms" in r:
             err += f", trace {r['trace_rms'] / r['trace_noise']:.2g} x noise"
         if "calibration" in r:
             named = f"calibrated {r['calibration']['parameter']}" + (" (found)" if r["calibration"]["found"] else " (not found)")
-            if r["calibration"].get("error_given_true_held_pct") is not None:
-                err += f", {r['calibration']['error_given_true_held_pct']:.1f} % corrected to the true held values"
         amb = " (ambiguous, the hidden effect runner-up)" if r.get("ambiguous_with_truth") else ""
         print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{amb}{err} ({r['seconds']:.0f} s)", flush=True)
     s = summary(rows)
