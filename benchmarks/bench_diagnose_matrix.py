@@ -459,6 +459,10 @@ def run_case(case: dict, work: Path) -> dict:
     if d.get("unexplained"):
         out["unexplained_because"] = d["unexplained"]["because"]
         out["closest"] = sorted((c["effect"], c["joint"]) for c in d["unexplained"].get("closest", []))
+    if case["group"] == "singles":
+        said = shown_row(d, case, joint)
+        if said is not None:
+            out["detectable"] = said
     finding = calibration_finding(d, case, joint)
     if finding is not None:
         # the rig's spec marks this parameter estimated: the diagnosis calibrates it as a nuisance and
@@ -489,6 +493,25 @@ def run_case(case: dict, work: Path) -> dict:
     else:
         out["right"] = not named
     return out
+
+
+def shown_row(d: dict, case: dict, joint: str) -> dict | None:
+    """What the report says the record could show of a single's hidden effect (``detectable``): the
+    smallest magnitude of its first parameter with an expected gain at the threshold, and whether the
+    hidden magnitude is below it (the report then told the user the record could not show it). None
+    where the report has no row for it (the effect was named, or is a calibrated nuisance)."""
+    n, j, p = case["hidden"][0]
+    key = next(iter(p))
+    for row in (d.get("detectable") or {}).get("effects", []):
+        if row["effect"] == n and row["joint"] == (joint if j is not None else None) and row["parameter"] == key:
+            null, top, v = row["null"], row["shows_from"], p[key]
+            if top is None:
+                below = True
+            else:
+                ref = null if null is not None else row["range_end"]
+                below = abs(v - ref) < abs(top - ref) if null is not None else abs(v) > abs(top)
+            return {"shows_from": top, "range_end": row["range_end"], "hidden_below": below}
+    return None
 
 
 def rig_off(joint: str) -> dict[str, float]:
@@ -559,6 +582,7 @@ def summary(rows: list[dict]) -> dict:
     traced_pairs = [r for r in g["pairs"] if "trace_rms" in r]
     visible_pairs = [r for r in traced_pairs if visible_trace(r)]
     secs = sorted(r["seconds"] for r in rows if "seconds" in r)
+    missed = [r for r in g["singles"] if not r["right"] and "detectable" in r]
     return {
         "cases": {k: len(v) for k, v in g.items()}, "failed": sum("failed" in r for r in rows),
         "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
@@ -572,6 +596,10 @@ def summary(rows: list[dict]) -> dict:
         "median_param_error_given_true_held_pct": held_true[len(held_true) // 2] if held_true else None,
         "worst_param_error_given_true_held_pct": held_true[-1] if held_true else None,
         "median_diagnose_s": secs[len(secs) // 2] if secs else None,
+        # beside the score: of the singles missed, those whose report said the record could not show
+        # the hidden effect at its magnitude (not a silent miss)
+        "singles_missed_with_detectable": len(missed),
+        "singles_missed_said_not_shown": sum(r["detectable"]["hidden_below"] for r in missed),
     }
 
 
@@ -618,6 +646,10 @@ def main() -> int:
         if "calibration" in r:
             named = f"calibrated {r['calibration']['parameter']}" + (" (found)" if r["calibration"]["found"] else " (not found)")
         amb = " (ambiguous, the hidden effect runner-up)" if r.get("ambiguous_with_truth") else ""
+        if not r["right"] and "detectable" in r:
+            top = r["detectable"]["shows_from"]
+            amb += (f" (said: shows from {top:.3g})" if top is not None else " (said: not within the range)") + (
+                ", the hidden one below it" if r["detectable"]["hidden_below"] else ", the hidden one above it: a silent miss")
         print(f"{r['id']:48s} {'right' if r['right'] else 'WRONG':5s} {named}{amb}{err} ({r['seconds']:.0f} s)", flush=True)
     s = summary(rows)
     print(f"\ncases: {s['cases']}, failed to run: {s['failed']}")
@@ -644,6 +676,10 @@ def main() -> int:
         vr = s["pairs_visible_right_pct"]
         print(f"  {'pairs whose both effects show':38s} {s['pairs_visible']} of {s['pairs_traced']}, "
               f"fully named {'-' if vr is None else f'{vr:.1f} %'}")
+    if s["singles_missed_with_detectable"]:
+        print(f"  {'singles missed, said not shown':38s} {s['singles_missed_said_not_shown']} of "
+              f"{s['singles_missed_with_detectable']} (the report's 'detectable' put the hidden magnitude below what "
+              f"the record shows; beside the score, not the score)")
     print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
           f"(the hidden effect is the runner-up)")
     med = s["median_diagnose_s"]

@@ -114,9 +114,11 @@ def draw(case: Case):
     return truth, pert, noise, seed % 1000
 
 
-def generate(cli, case: Case, where):
-    """Write the input and the 'measured' CSV with the real commands; returns (csv path, truth)."""
+def generate(cli, case: Case, where, extra: list[tuple[str, str | None, dict]] = ()):
+    """Write the input and the 'measured' CSV with the real commands; returns (csv path, truth).
+    ``extra``: effects (name, joint, values) hidden beside the case's, on the same draw of everything else."""
     truth, pert, noise, seed = draw(case)
+    truth = truth + list(extra)
     inp = where / "in.csv"
     meas = where / "measured.csv"
     cli("excite", "--robot", case.robot, "--joint", case.joint, "--duration", DURATION, "--seed", seed,

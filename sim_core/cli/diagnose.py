@@ -41,7 +41,8 @@ def run(args):
     import sys
 
     from ..effects import EFFECTS
-    from ..identification import conditional, diagnosis, report
+    from ..identification import conditional, detectability, diagnosis, report
+    from ..identification.decision import THRESHOLD_POINTS
     from ..identification.record import load_record
     from ..ingest import options_from_args
     from . import CliError
@@ -101,6 +102,12 @@ def run(args):
         print(f"  in the record: {cause}")
     for spot in d.calibration.get("blind_spots", []):
         print(f"  not testable: {spot}")
+    for row in d.detectable:
+        if row["shows_from"] is None:
+            print(f"  cannot show: {detectability.describe(row, THRESHOLD_POINTS)}")
+    shows = [detectability.describe(row, THRESHOLD_POINTS) for row in d.detectable if row["shows_from"] is not None]
+    if shows:
+        print(f"  would show (estimated): {'; '.join(shows)}")
     for j, f in d.baseline_fits.items():
         if f.get("excited", True):
             print(f"  fit {j}: {f['angle']:.2f} % -> {d.extended_fits[j]['angle']:.2f} %")

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..dataset import column_unit
 from . import output_error as oe
-from . import blind_spots, command_null, conditional, held_at_extreme, polarity
+from . import blind_spots, command_null, conditional, detectability, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .candidates import bank
@@ -75,6 +75,7 @@ class Diagnosis:
     pairs: list[dict] = field(default_factory=list)   # the masked-pair fits, when a pair search ran
     channel_ceilings: dict = field(default_factory=dict)   # joint -> channel -> noise ceiling (fit, %)
     restart_s: float | None = None   # the validation angle restarts from the record this often (closed loop)
+    detectable: list[dict] = field(default_factory=list)   # detectability.shown: what the record could show
 
     @property
     def verdict(self) -> str:
@@ -120,6 +121,13 @@ class Diagnosis:
             "signatures": {j: public(s) for j, s in self.signatures.items()},
             "residual_tests": {k: {j: public(v) for j, v in t.items()} for k, t in self.tests.items()},
             "unexplained": self.unexplained,
+            "detectable": {"effects": self.detectable, "threshold_points": THRESHOLD_POINTS,
+                           "how": "each effect not named, put into the final model at magnitudes searched by "
+                                  "bisection (shares of the way from where it vanishes to the far end of its search "
+                                  "range, a factor 2 apart, or 1/16 of the range on a log scale), "
+                                  "simulated, the calibrated parameters refitted to it to first order; shows_from: "
+                                  "the smallest magnitude whose expected gain reaches the threshold (null: not within "
+                                  "the range). An estimate on the first half of the estimation window with one noise draw"},
             "timings_s": self.timings,
         }
 
@@ -529,11 +537,22 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
                                                 {(s["effect"], s["joint"]) for s in selected})
     notes.extend(calib["blind_spots"])
+    # what the record could have shown of every effect not named, beside the final model refitted to it
+    named = {(m.effect, m.joint) for e in sel.accepted for m in getattr(e.candidate, "members", (e.candidate,))}
+    # (on the window the fits rank their starts on: the Jacobian's rows of the estimation window cut to it)
+    jac = final.jacobian if final is not None and selected else (cal.result.jacobian if cal.identified else None)
+    with SideBySide(workers if backend is None else 1) as side:
+        shows = detectability.shown(
+            ext_acc, [c for c in cands if (c.effect, c.joint) not in named], fast, st.grid,
+            None if jac is None else jac[detectability.rows_within(est, st.grid)],
+            lambda c: affected_joints(c, est.joints), threshold=THRESHOLD_POINTS, noise=noise,
+            pressure_noise=pn_val, restart=vprob.restart, side=side)
+    timings["detectable"] = time.perf_counter() - t_start
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
                      {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings,
-                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None)
+                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None, shows)
 
 
 def _score(fits: dict, joints: list[str]) -> float:

@@ -284,6 +284,25 @@ def _fmt(v, digits=4):
     return html.escape(str(v))
 
 
+def _detectable_html(det: dict, e) -> str:
+    """What the record could have shown of each effect not named (detectability.shown)."""
+    rows = det.get("effects") or []
+    if not rows:
+        return ""
+    out = [f"<h2>What this record can show</h2><p>Each effect not named, put into the final model and the calibration "
+           f"refitted beside it to first order: the smallest magnitude whose expected gain reaches "
+           f"{det.get('threshold_points', 2):g} points. An estimate; a magnitude under it would not have been named "
+           f"on this record.</p><table><tr><th>effect</th><th>joint</th><th>shows from</th><th>far end of the range</th></tr>"]
+    for r in rows:
+        unit = f" {r['unit']}" if r["unit"] else ""
+        top = "not within the range" if r["shows_from"] is None else f"{r['parameter']} = {_fmt(r['shows_from'])}{unit}"
+        out.append(f"<tr><td>{e(r['effect'])}</td><td>{e(str(r['joint'] or '-'))}</td>"
+                   f"<td class='{'bad' if r['shows_from'] is None else ''}'>{e(top)}</td>"
+                   f"<td>{e(_fmt(r['range_end']) + unit)}</td></tr>")
+    out.append("</table>")
+    return "".join(out)
+
+
 def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
     e = html.escape
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>HydroHIL diagnosis: {e(d.robot)}</title>",
@@ -376,6 +395,7 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                      f"<td>{c['gain']:+.2f}{_share(c)}</td><td>{_fmt(c['bic_delta'])}</td><td>{e(params)}</td>"
                      f"<td class='{'ok' if c['accepted'] else ''}'>{e(why)}</td></tr>")
     parts.append("</table>")
+    parts.append(_detectable_html(data.get("detectable") or {}, e))
     # data checks
     parts.append("<h2>Data checks</h2><ul>")
     chk = data["data"]

@@ -1,0 +1,158 @@
+"""What a record can show: for every effect of the bank the diagnosis did not name, the smallest
+magnitude that would have reached the acceptance threshold on this record.
+
+"No significant discrepancy" is only as strong as the record behind it. A Coulomb friction on a
+position-only record sets the same speeds per volt as the valve's flow gain; a sensor offset moves
+the model's start pose with it, since the start is read off the same sensor; a flow limit the
+excitation never reaches leaves no trace. So each effect is put into the final model at a ladder of
+magnitudes (shares of the way, in its fit coordinate, from where it vanishes to the far end of its
+search range), simulated, and the model's calibrated parameters are refitted to that output to first
+order: least squares on the final fit's own Jacobian columns. What the refit cannot take up, with the
+record's noise drawn on top, is the gain a candidate of that magnitude could show; the smallest rung
+whose gain reaches the threshold is what the record shows, none: the record cannot test for the
+effect within the bank's range. An estimate (first order in the calibrated parameters, one noise
+draw, the first half of the estimation window, where the fits rank their starts; rungs a factor 2
+apart, or 1/16 of a log-scaled range), reported as one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .output_error import Problem, _simulate_all
+from .simulation import Outputs
+
+# shares of the way from the null to the far search bound, in the fit coordinate: a factor 2 apart
+# for a parameter searched on a linear scale, 1/16 of the range apart on a log scale (a factor 2
+# there would span decades near the null)
+LINEAR_SHARES = tuple(2.0 ** -k for k in range(7, -1, -1))
+LOG_SHARES = tuple(k / 16 for k in range(1, 17))
+SEED = 20261202                               # the noise drawn on each rung's output (a fixed draw: reproducible)
+
+
+def rungs(fp) -> list[float]:
+    """The ladder's values of ``fp`` (a candidate's first free parameter), nearest the null first:
+    from its null towards the search bound farther from it in the fit coordinate. [] where the
+    parameter has no null."""
+    null = fp.null
+    if null is None or math.isnan(null):
+        return []
+    xn = fp.to_x(null)
+    xf = 1.0 if 1.0 - xn >= xn else 0.0
+    return [fp.from_x(xn + s * (xf - xn)) for s in (LOG_SHARES if fp.log else LINEAR_SHARES)]
+
+
+def rows_within(full: Problem, part: Problem) -> np.ndarray:
+    """The rows of ``full``'s residual (and Jacobian) that ``part`` has: both start at the same sample
+    and ``part`` ends earlier (a shorter window of the same channels)."""
+    idx, pos = [], 0
+    for k, y in full.meas.items():
+        if k in part.meas:
+            idx.append(pos + np.arange(part.meas[k].size))
+        pos += y.size
+    return np.concatenate(idx) if idx else np.zeros(0, dtype=int)
+
+
+def absorbed(problem: Problem, base: Outputs, truth: Outputs, jacobian: np.ndarray | None) -> Outputs:
+    """``base``'s outputs with the calibrated parameters refitted, to first order, to ``truth``: the
+    least-squares step on ``jacobian`` (d residual / d x over the problem's channels) that brings the
+    model closest to ``truth``, applied to the simulated angles and pressures (the velocity channel
+    follows from the angle; its rows take part in the step)."""
+    angles = {j: np.array(a, dtype=float) for j, a in base.angles.items()}
+    pressures = {j: [np.array(pa, dtype=float), np.array(pb, dtype=float)] for j, (pa, pb) in base.pressures.items()}
+    if jacobian is not None and jacobian.size and np.all(np.isfinite(jacobian)):
+        d = problem.residuals(base) - problem.residuals(truth)      # the model's residual against truth
+        step, *_ = np.linalg.lstsq(jacobian, -d, rcond=None)
+        change = -(jacobian @ step)                                 # of the simulated channels, residual units
+        sl = slice(problem.start, problem.n)
+        pos = 0
+        for (j, ch), y in problem.meas.items():
+            seg = change[pos: pos + y.size] * problem.scale[(j, ch)] / math.sqrt(problem.weight[(j, ch)])
+            pos += y.size
+            if ch == "angle":
+                angles[j][sl] += seg
+            elif ch in ("p_a", "p_b"):
+                pressures[j][0 if ch == "p_a" else 1][sl] += seg
+    return Outputs(angles, {j: (pa, pb) for j, (pa, pb) in pressures.items()})
+
+
+def expected_gain(problem: Problem, base: Outputs, truth: Outputs, jacobian: np.ndarray | None, joints: list[str],
+                  noise: dict[str, float], pressure_noise: dict[str, float], restart: int) -> float:
+    """The score gain (points) a candidate that reproduces ``truth`` shows over the baseline refitted to it,
+    on a record of ``truth`` with the record's noise (angle ``noise`` in rad, ``pressure_noise`` in Pa)."""
+    if not (truth.ok and base.ok):
+        return math.nan
+    rec = problem.redrawn(truth, noise, pressure_noise, np.random.default_rng(SEED))
+    if restart:
+        rec = rec.restarting(restart)
+    with_effect = rec.fits(truth)
+    without = rec.fits(absorbed(problem, base, truth, jacobian))
+    return float(np.mean([with_effect[j]["score"] - without[j]["score"] for j in joints]))
+
+
+def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | None, joints_of, *, threshold: float,
+          noise: dict[str, float], pressure_noise: dict[str, float], restart: int = 0, side=None) -> list[dict]:
+    """For each candidate of ``cands`` (effects not in ``model``): its first parameter's ladder
+    searched by bisection for the smallest rung whose expected gain reaches ``threshold``, the top
+    rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its gain
+    is scored on. The rungs of all candidates run side by side, one bisection step at a time."""
+    base = runner.simulate(model, problem.n)
+    todo = []
+    for c in cands:
+        if not c.free or not rungs(c.free[0]):
+            continue
+        values = rungs(c.free[0])
+        todo.append({"cand": c, "fp": c.free[0], "values": values, "gains": {}, "lo": -1,
+                     "hi": len(values) - 1, "next": len(values) - 1})
+    while True:
+        batch = [t for t in todo if t["next"] is not None]
+        if not batch:
+            break
+        specs = []
+        for t in batch:
+            s = t["cand"].prepare(model)
+            t["fp"].apply(s, t["values"][t["next"]])
+            specs.append(s)
+        outs = _simulate_all(runner, specs, problem.n, side)
+        for t, out in zip(batch, outs):
+            k = t["next"]
+            g = expected_gain(problem, base, out, jacobian, joints_of(t["cand"]), noise, pressure_noise, restart)
+            t["gains"][k] = g
+            passes = math.isfinite(g) and g >= threshold
+            if k == len(t["values"]) - 1 and not passes:
+                t["hi"] = None                      # not even at the far end of the range
+            elif passes:
+                t["hi"] = k
+            else:
+                t["lo"] = k
+            t["next"] = None if t["hi"] is None or t["hi"] - t["lo"] <= 1 else (t["lo"] + t["hi"]) // 2
+    out = []
+    for t in todo:
+        c, fp = t["cand"], t["fp"]
+        name = fp.key.split(".")[-1]
+        out.append({
+            "effect": c.effect, "joint": c.joint, "parameter": name, "unit": fp.unit, "null": _num(fp.null),
+            "range_end": _num(t["values"][-1]),
+            "shows_from": None if t["hi"] is None else _num(t["values"][t["hi"]]),
+            "tested": [{"value": _num(t["values"][k]), "expected_gain": _num(g)} for k, g in sorted(t["gains"].items())],
+        })
+    return out
+
+
+def describe(row: dict, threshold: float) -> str:
+    """One line of the CLI's answer for ``detectable``'s row."""
+    where = f" on {row['joint']}" if row["joint"] else ""
+    unit = f" {row['unit']}" if row["unit"] else ""
+    if row["shows_from"] is None:
+        top = row["tested"][-1]["expected_gain"] if row["tested"] else None
+        gain = f", {top:+.2f} points there" if top is not None else ""
+        return (f"{row['effect']}{where}: not even at {row['parameter']} = {row['range_end']:.4g}{unit} (the far end of "
+                f"its range{gain}, under the {threshold:g} a gain must reach)")
+    return f"{row['effect']}{where}: from about {row['parameter']} = {row['shows_from']:.4g}{unit}"
+
+
+def _num(v):
+    v = float(v)
+    return v if math.isfinite(v) else None

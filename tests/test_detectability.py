@@ -1,0 +1,117 @@
+"""What a record can show (detectability.py): the ladder of magnitudes, the first-order refit of the
+calibration, and, end to end, that an effect the report says the record shows from a magnitude is
+named well above it and not named well below it."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sim_core.identification import detectability
+from sim_core.identification.candidates import bank
+from sim_core.identification.output_error import Problem
+from sim_core.identification.parameters import FreeParameter
+from sim_core.identification.record import Record
+from sim_core.identification.simulation import Outputs
+from sim_core.model.spec import load_robot
+
+from conftest import run_cli
+from diagnose_cases import CLEAN, generate
+
+
+def test_a_linear_ladder_runs_from_the_null_to_the_far_bound_a_factor_2_apart():
+    fp = FreeParameter("effects.valve_offset.j2.offset", -1.5, 1.5, null=0.0)
+    v = detectability.rungs(fp)
+    assert v[-1] == pytest.approx(1.5)                  # both bounds as far: the upper one
+    assert np.allclose(np.diff(np.log(v)), math.log(2.0))
+    assert v[0] == pytest.approx(1.5 / 2 ** 7)
+
+
+def test_a_ladder_turns_to_the_bound_farther_from_the_null():
+    fp = FreeParameter("effects.valve_asymmetry.j2.ratio", 0.3, 1.2, null=1.0)
+    v = detectability.rungs(fp)
+    assert v[-1] == pytest.approx(0.3) and all(0.3 <= x < 1.0 for x in v)
+    assert v == sorted(v, reverse=True)                 # nearest the null first
+
+
+def test_a_log_ladder_takes_sixteenths_of_the_range():
+    fp = FreeParameter("effects.coulomb_friction.j2.torque", 0.1, 1e4, log=True, null=0.0)
+    v = detectability.rungs(fp)
+    assert len(v) == 16 and v[-1] == pytest.approx(1e4)
+    assert np.allclose(np.diff(np.log(v)), math.log(1e5) / 16)
+    # a flow limit vanishes at infinity: the ladder comes down from the upper bound
+    fs = FreeParameter("effects.flow_saturation.j2.max_flow", 1e-6, 1e-3, log=True, null=math.inf)
+    assert detectability.rungs(fs)[-1] == pytest.approx(1e-6)
+    assert detectability.rungs(FreeParameter("x", 0.0, 1.0, null=None)) == []
+
+
+def _problem(angle, t):
+    rec = Record("synthetic", t, np.zeros((t.size, 1)), {"j": angle}, {}, ["j"], ["j"], {"j": float(angle[0])})
+    return Problem(rec, ["j"])
+
+
+def test_the_first_order_refit_takes_up_what_the_calibration_can_and_nothing_else():
+    t = np.arange(0.0, 10.0, 0.01)
+    base = np.sin(t)
+    prob = _problem(base, t)
+    out = lambda a: Outputs({"j": a}, {})
+    # the one calibrated parameter scales the motion: its Jacobian column, d residual / dx = -d sim / dx
+    col = -np.concatenate([v / prob.scale[("j", ch)] for ch, v in
+                           (("angle", base), ("velocity", prob.simulated(out(base))[("j", "velocity")]))])
+    J = col[:, None]
+    scaled = out(1.3 * base)
+    took = detectability.absorbed(prob, out(base), scaled, J)
+    assert np.max(np.abs(took.angles["j"] - 1.3 * base)) < 1e-9          # in the span: all of it
+    bent = out(base + 0.1 * np.cos(3 * t))
+    left = detectability.absorbed(prob, out(base), bent, J)
+    assert np.max(np.abs(left.angles["j"] - base)) < 0.02                 # orthogonal to it: almost none
+    none = detectability.absorbed(prob, out(base), scaled, None)
+    assert np.array_equal(none.angles["j"], base)                        # nothing calibrated: nothing taken
+    # the expected gain: none for what the calibration takes up, points for what it cannot
+    g_scaled = detectability.expected_gain(prob, out(base), scaled, J, ["j"], {"j": 1e-3}, {}, 0)
+    g_bent = detectability.expected_gain(prob, out(base), bent, J, ["j"], {"j": 1e-3}, {}, 0)
+    assert abs(g_scaled) < 0.2 and g_bent > 5.0
+
+
+@pytest.fixture(scope="module")
+def clean_record(tmp_path_factory):
+    where = tmp_path_factory.mktemp("clean")
+    case = CLEAN[0]
+    meas, _ = generate(run_cli, case, where)
+    proc = run_cli("diagnose", "--robot", case.robot, meas, "--report", where / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    return case, json.loads((where / "rep" / "diagnosis.json").read_text()), proc.stdout
+
+
+def test_every_effect_not_named_has_what_the_record_shows(clean_record):
+    case, d, stdout = clean_record
+    assert d["verdict"] == "no_significant_discrepancy"
+    rows = d["detectable"]["effects"]
+    # every candidate whose effect vanishes at some value of its parameter (line dynamics replaces the
+    # hoses' lumping at any value: no null, no ladder)
+    with_null = {(c.effect, c.joint) for c in bank(load_robot(case.robot), [case.joint]) if detectability.rungs(c.free[0])}
+    assert {(r["effect"], r["joint"]) for r in rows} == with_null & {(c["effect"], c["joint"]) for c in d["candidates"]}
+    assert len(rows) >= len(d["candidates"]) - 1
+    for r in rows:
+        gains = [x["expected_gain"] for x in r["tested"]]
+        if r["shows_from"] is None:
+            assert gains[-1] is None or gains[-1] < d["detectable"]["threshold_points"]
+        else:
+            hit = next(x for x in r["tested"] if x["value"] == r["shows_from"])
+            assert hit["expected_gain"] >= d["detectable"]["threshold_points"]
+    assert "would show (estimated):" in stdout
+
+
+@pytest.mark.parametrize("factor, named", [(4.0, True), (0.25, False)], ids=["4x_named", "quarter_not_named"])
+def test_a_valve_offset_is_named_above_what_the_record_shows_and_not_below(cli, clean_record, tmp_path, factor, named):
+    case, d, _ = clean_record
+    row = next(r for r in d["detectable"]["effects"] if r["effect"] == "valve_offset")
+    assert row["shows_from"] is not None
+    offset = factor * row["shows_from"]
+    meas, _ = generate(cli, case, tmp_path, extra=[("valve_offset", case.joint, {"offset": offset})])
+    proc = cli("diagnose", "--robot", case.robot, meas, "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    names = [s["effect"] for s in got["selected"]]
+    assert (names == ["valve_offset"]) if named else (names == []), (offset, names, got["verdict"])
