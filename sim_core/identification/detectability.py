@@ -110,13 +110,19 @@ def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | N
         batch = [t for t in todo if t["next"] is not None]
         if not batch:
             break
-        specs = []
+        specs, runs = [], []
         for t in batch:
-            s = t["cand"].prepare(model)
-            t["fp"].apply(s, t["values"][t["next"]])
+            try:
+                s = t["cand"].prepare(model)
+                t["fp"].apply(s, t["values"][t["next"]])
+            except ValueError:          # a value the model refuses: that rung cannot be tried
+                t["gains"][t["next"]] = math.nan
+                t["hi"], t["next"] = None, None
+                continue
             specs.append(s)
+            runs.append(t)
         outs = _simulate_all(runner, specs, problem.n, side)
-        for t, out in zip(batch, outs):
+        for t, out in zip(runs, outs):
             k = t["next"]
             g = expected_gain(problem, base, out, jacobian, joints_of(t["cand"]), noise, pressure_noise, restart)
             t["gains"][k] = g
