@@ -496,14 +496,16 @@ def run_case(case: dict, work: Path) -> dict:
 
 
 def shown_row(d: dict, case: dict, joint: str) -> dict | None:
-    """What the report says the record could show of a single's hidden effect (``detectable``): the
-    smallest magnitude of its first parameter with an expected gain at the threshold, and whether the
-    hidden magnitude is below it (the report then told the user the record could not show it). None
-    where the report has no row for it (the effect was named, or is a calibrated nuisance)."""
+    """What the report says the record could show of a single's hidden effect (``detectable``; when
+    named, its row on the model without it): the smallest magnitude of its first parameter with an
+    expected gain at the threshold, and whether the hidden magnitude is below it (the report then
+    told the user the record could not show it). None where the report has no row for it (a
+    calibrated nuisance, an effect with no value where it vanishes)."""
     n, j, p = case["hidden"][0]
     key = next(iter(p))
     for row in (d.get("detectable") or {}).get("effects", []):
-        if row["effect"] == n and row["joint"] == (joint if j is not None else None) and row["parameter"] == key:
+        if (row["effect"] == n and row["joint"] == (joint if j is not None else None) and row["parameter"] == key
+                and row.get("named", False) == (n in {e for e, _ in d_named(d)})):
             null, top, v = row["null"], row["shows_from"], p[key]
             if top is None:
                 below = True
@@ -512,6 +514,10 @@ def shown_row(d: dict, case: dict, joint: str) -> dict | None:
                 below = abs(v - ref) < abs(top - ref) if null is not None else abs(v) > abs(top)
             return {"shows_from": top, "range_end": row["range_end"], "hidden_below": below}
     return None
+
+
+def d_named(d: dict) -> list[tuple[str, str | None]]:
+    return [(s["effect"], s["joint"]) for s in d["selected"]]
 
 
 def rig_off(joint: str) -> dict[str, float]:
@@ -583,6 +589,7 @@ def summary(rows: list[dict]) -> dict:
     visible_pairs = [r for r in traced_pairs if visible_trace(r)]
     secs = sorted(r["seconds"] for r in rows if "seconds" in r)
     missed = [r for r in g["singles"] if not r["right"] and "detectable" in r]
+    shown_singles = [r for r in g["singles"] if "detectable" in r and not r["detectable"]["hidden_below"]]
     return {
         "cases": {k: len(v) for k, v in g.items()}, "failed": sum("failed" in r for r in rows),
         "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
@@ -600,6 +607,9 @@ def summary(rows: list[dict]) -> dict:
         # the hidden effect at its magnitude (not a silent miss)
         "singles_missed_with_detectable": len(missed),
         "singles_missed_said_not_shown": sum(r["detectable"]["hidden_below"] for r in missed),
+        # and of the singles whose hidden magnitude is at or above what the report says the record
+        # shows, the share named right (the report's own estimate sorts them: beside the score)
+        "singles_said_shown": len(shown_singles), "singles_said_shown_right_pct": pct(shown_singles),
     }
 
 
@@ -680,6 +690,9 @@ def main() -> int:
         print(f"  {'singles missed, said not shown':38s} {s['singles_missed_said_not_shown']} of "
               f"{s['singles_missed_with_detectable']} (the report's 'detectable' put the hidden magnitude below what "
               f"the record shows; beside the score, not the score)")
+    if s["singles_said_shown"]:
+        print(f"  {'singles said shown by their report':38s} {s['singles_said_shown']}, named right "
+              f"{s['singles_said_shown_right_pct']:.1f} % (the hidden magnitude at or above 'shows from'; beside the score)")
     print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
           f"(the hidden effect is the runner-up)")
     med = s["median_diagnose_s"]

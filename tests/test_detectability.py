@@ -115,3 +115,10 @@ def test_a_valve_offset_is_named_above_what_the_record_shows_and_not_below(cli, 
     got = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     names = [s["effect"] for s in got["selected"]]
     assert (names == ["valve_offset"]) if named else (names == []), (offset, names, got["verdict"])
+    if named:
+        # the named effect's own row, on the model without it: the same record shows it from about
+        # where the clean record's report said (the same motion, the effect's trace aside)
+        own = next(r for r in got["detectable"]["effects"] if r["effect"] == "valve_offset")
+        assert own["named"] and own["shows_from"] is not None
+        assert 0.25 * row["shows_from"] <= own["shows_from"] <= 4.0 * row["shows_from"]
+        assert not any(r["named"] for r in got["detectable"]["effects"] if r["effect"] != "valve_offset")

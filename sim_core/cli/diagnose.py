@@ -91,6 +91,13 @@ def run(args):
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
         for line in conditional.describe(s):
             print(f"    {line}")
+        for row in d.detectable:
+            if row.get("named") and (row["effect"], row["joint"]) == (s["effect"], s["joint"]):
+                unit = f" {row['unit']}" if row["unit"] else ""
+                print(f"    the record shows it from about {row['parameter']} = {row['shows_from']:.4g}{unit} (estimated, "
+                      f"on the model without it)" if row["shows_from"] is not None else
+                      "    the estimate of what the record shows does not reach it within its range (first order: "
+                      "a named effect beyond it was refitted further than the estimate's calibration)")
     for k, r in d.calibration.get("refitted_with_effects", {}).items():
         v, n = r["value"], r["nominal"]
         if n is not None and v is not None and v != n:
@@ -102,10 +109,11 @@ def run(args):
         print(f"  in the record: {cause}")
     for spot in d.calibration.get("blind_spots", []):
         print(f"  not testable: {spot}")
-    for row in d.detectable:
+    others = [row for row in d.detectable if not row.get("named")]
+    for row in others:
         if row["shows_from"] is None:
             print(f"  cannot show: {detectability.describe(row, THRESHOLD_POINTS)}")
-    shows = [detectability.describe(row, THRESHOLD_POINTS) for row in d.detectable if row["shows_from"] is not None]
+    shows = [detectability.describe(row, THRESHOLD_POINTS) for row in others if row["shows_from"] is not None]
     if shows:
         print(f"  would show (estimated): {'; '.join(shows)}")
     for j, f in d.baseline_fits.items():

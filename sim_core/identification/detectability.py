@@ -1,5 +1,6 @@
 """What a record can show: for every effect of the bank the diagnosis did not name, the smallest
-magnitude that would have reached the acceptance threshold on this record.
+magnitude that would have reached the acceptance threshold on this record (and for each one it
+named, the same on the model without it: how far above that the named value is).
 
 "No significant discrepancy" is only as strong as the record behind it. A Coulomb friction on a
 position-only record sets the same speeds per volt as the valve's flow gain; a sensor offset moves
@@ -92,20 +93,23 @@ def expected_gain(problem: Problem, base: Outputs, truth: Outputs, jacobian: np.
     return float(np.mean([with_effect[j]["score"] - without[j]["score"] for j in joints]))
 
 
-def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | None, joints_of, *, threshold: float,
-          noise: dict[str, float], pressure_noise: dict[str, float], restart: int = 0, side=None) -> list[dict]:
-    """For each candidate of ``cands`` (effects not in ``model``): its first parameter's ladder
-    searched by bisection for the smallest rung whose expected gain reaches ``threshold``, the top
-    rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its gain
-    is scored on. The rungs of all candidates run side by side, one bisection step at a time."""
-    base = runner.simulate(model, problem.n)
+def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold: float, noise: dict[str, float],
+          pressure_noise: dict[str, float], restart: int = 0, side=None) -> list[dict]:
+    """For each candidate of each group ``(model, jacobian, cands, named)`` (effects not in ``model``;
+    ``jacobian`` its calibrated parameters' columns, None: nothing calibrated): its first parameter's
+    ladder searched by bisection for the smallest rung whose expected gain reaches ``threshold``, the
+    top rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its
+    gain is scored on; ``named`` marks the rows of the effects the diagnosis named (searched on the
+    model without them: how far above what the record shows they are). Every rung of a bisection step
+    runs side by side."""
+    bases = _simulate_all(runner, [g[0].copy() for g in groups], problem.n, side)
     todo = []
-    for c in cands:
-        if not c.free or not rungs(c.free[0]):
-            continue
-        values = rungs(c.free[0])
-        todo.append({"cand": c, "fp": c.free[0], "values": values, "gains": {}, "lo": -1,
-                     "hi": len(values) - 1, "next": len(values) - 1})
+    for gi, (_, _, cands, _) in enumerate(groups):
+        for c in cands:
+            values = rungs(c.free[0]) if c.free else []
+            if values:
+                todo.append({"group": gi, "cand": c, "fp": c.free[0], "values": values, "gains": {}, "lo": -1,
+                             "hi": len(values) - 1, "next": len(values) - 1})
     while True:
         batch = [t for t in todo if t["next"] is not None]
         if not batch:
@@ -113,7 +117,7 @@ def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | N
         specs, runs = [], []
         for t in batch:
             try:
-                s = t["cand"].prepare(model)
+                s = t["cand"].prepare(groups[t["group"]][0])
                 t["fp"].apply(s, t["values"][t["next"]])
             except ValueError:          # a value the model refuses: that rung cannot be tried
                 t["gains"][t["next"]] = math.nan
@@ -124,7 +128,8 @@ def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | N
         outs = _simulate_all(runner, specs, problem.n, side)
         for t, out in zip(runs, outs):
             k = t["next"]
-            g = expected_gain(problem, base, out, jacobian, joints_of(t["cand"]), noise, pressure_noise, restart)
+            g = expected_gain(problem, bases[t["group"]], out, groups[t["group"]][1], joints_of(t["cand"]), noise,
+                              pressure_noise, restart)
             t["gains"][k] = g
             passes = math.isfinite(g) and g >= threshold
             if k == len(t["values"]) - 1 and not passes:
@@ -140,7 +145,7 @@ def shown(model, cands: list, runner, problem: Problem, jacobian: np.ndarray | N
         name = fp.key.split(".")[-1]
         out.append({
             "effect": c.effect, "joint": c.joint, "parameter": name, "unit": fp.unit, "null": _num(fp.null),
-            "range_end": _num(t["values"][-1]),
+            "named": bool(groups[t["group"]][3]), "range_end": _num(t["values"][-1]),
             "shows_from": None if t["hi"] is None else _num(t["values"][t["hi"]]),
             "tested": [{"value": _num(t["values"][k]), "expected_gain": _num(g)} for k, g in sorted(t["gains"].items())],
         })

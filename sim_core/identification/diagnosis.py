@@ -122,12 +122,13 @@ class Diagnosis:
             "residual_tests": {k: {j: public(v) for j, v in t.items()} for k, t in self.tests.items()},
             "unexplained": self.unexplained,
             "detectable": {"effects": self.detectable, "threshold_points": THRESHOLD_POINTS,
-                           "how": "each effect not named, put into the final model at magnitudes searched by "
-                                  "bisection (shares of the way from where it vanishes to the far end of its search "
-                                  "range, a factor 2 apart, or 1/16 of the range on a log scale), "
+                           "how": "each effect not named (named: false), put into the final model at magnitudes "
+                                  "searched by bisection (shares of the way from where it vanishes to the far end of "
+                                  "its search range, a factor 2 apart, or 1/16 of the range on a log scale), "
                                   "simulated, the calibrated parameters refitted to it to first order; shows_from: "
                                   "the smallest magnitude whose expected gain reaches the threshold (null: not within "
-                                  "the range). An estimate on the first half of the estimation window with one noise draw"},
+                                  "the range); each named effect (named: true) the same on the calibrated baseline. "
+                                  "An estimate on the first half of the estimation window with one noise draw"},
             "timings_s": self.timings,
         }
 
@@ -539,14 +540,19 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     notes.extend(calib["blind_spots"])
     # what the record could have shown of every effect not named, beside the final model refitted to it
     named = {(m.effect, m.joint) for e in sel.accepted for m in getattr(e.candidate, "members", (e.candidate,))}
-    # (on the window the fits rank their starts on: the Jacobian's rows of the estimation window cut to it)
-    jac = final.jacobian if final is not None and selected else (cal.result.jacobian if cal.identified else None)
+    # and of each named effect on the calibrated baseline; on the window the fits rank their starts on
+    # (the Jacobians' rows of the estimation window cut to it)
+    rows = detectability.rows_within(est, st.grid)
+    cal_jac = cal.result.jacobian if cal.identified and cal.result.jacobian is not None else None
+    ext_jac = final.jacobian if final is not None and selected else cal_jac
+    groups = [(ext_acc, None if ext_jac is None else ext_jac[rows], [c for c in cands if (c.effect, c.joint) not in named], False)]
+    if selected:
+        groups.append((base_acc, None if cal_jac is None else cal_jac[rows],
+                       [c for c in cands if (c.effect, c.joint) in named], True))
     with SideBySide(workers if backend is None else 1) as side:
-        shows = detectability.shown(
-            ext_acc, [c for c in cands if (c.effect, c.joint) not in named], fast, st.grid,
-            None if jac is None else jac[detectability.rows_within(est, st.grid)],
-            lambda c: affected_joints(c, est.joints), threshold=THRESHOLD_POINTS, noise=noise,
-            pressure_noise=pn_val, restart=vprob.restart, side=side)
+        shows = detectability.shown(groups, fast, st.grid, lambda c: affected_joints(c, est.joints),
+                                    threshold=THRESHOLD_POINTS, noise=noise, pressure_noise=pn_val,
+                                    restart=vprob.restart, side=side)
     timings["detectable"] = time.perf_counter() - t_start
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,

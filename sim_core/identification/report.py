@@ -291,12 +291,13 @@ def _detectable_html(det: dict, e) -> str:
         return ""
     out = [f"<h2>What this record can show</h2><p>Each effect not named, put into the final model and the calibration "
            f"refitted beside it to first order: the smallest magnitude whose expected gain reaches "
-           f"{det.get('threshold_points', 2):g} points. An estimate; a magnitude under it would not have been named "
-           f"on this record.</p><table><tr><th>effect</th><th>joint</th><th>shows from</th><th>far end of the range</th></tr>"]
+           f"{det.get('threshold_points', 2):g} points (a named effect: the same on the model without it). An "
+           f"estimate; a magnitude under it would not have been named on this record.</p><table><tr><th>effect</th>"
+           f"<th>joint</th><th>shows from</th><th>far end of the range</th></tr>"]
     for r in rows:
         unit = f" {r['unit']}" if r["unit"] else ""
         top = "not within the range" if r["shows_from"] is None else f"{r['parameter']} = {_fmt(r['shows_from'])}{unit}"
-        out.append(f"<tr><td>{e(r['effect'])}</td><td>{e(str(r['joint'] or '-'))}</td>"
+        out.append(f"<tr><td>{e(r['effect'] + (' (named)' if r.get('named') else ''))}</td><td>{e(str(r['joint'] or '-'))}</td>"
                    f"<td class='{'bad' if r['shows_from'] is None else ''}'>{e(top)}</td>"
                    f"<td>{e(_fmt(r['range_end']) + unit)}</td></tr>")
     out.append("</table>")
