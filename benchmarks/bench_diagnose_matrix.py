@@ -503,21 +503,19 @@ def shown_row(d: dict, case: dict, joint: str) -> dict | None:
     calibrated nuisance, an effect with no value where it vanishes)."""
     n, j, p = case["hidden"][0]
     key = next(iter(p))
+    named = n in {s["effect"] for s in d["selected"]}
     for row in (d.get("detectable") or {}).get("effects", []):
         if (row["effect"] == n and row["joint"] == (joint if j is not None else None) and row["parameter"] == key
-                and row.get("named", False) == (n in {e for e, _ in d_named(d)})):
+                and row.get("named", False) == named):
             null, top, v = row["null"], row["shows_from"], p[key]
             if top is None:
                 below = True
+            elif null is None:              # vanishes at infinity (a flow limit): the weaker, the larger
+                below = v > top
             else:
-                ref = null if null is not None else row["range_end"]
-                below = abs(v - ref) < abs(top - ref) if null is not None else abs(v) > abs(top)
+                below = abs(v - null) < abs(top - null)
             return {"shows_from": top, "range_end": row["range_end"], "hidden_below": below}
     return None
-
-
-def d_named(d: dict) -> list[tuple[str, str | None]]:
-    return [(s["effect"], s["joint"]) for s in d["selected"]]
 
 
 def rig_off(joint: str) -> dict[str, float]:

@@ -93,11 +93,10 @@ def run(args):
             print(f"    {line}")
         for row in d.detectable:
             if row.get("named") and (row["effect"], row["joint"]) == (s["effect"], s["joint"]):
-                unit = f" {row['unit']}" if row["unit"] else ""
-                print(f"    the record shows it from about {row['parameter']} = {row['shows_from']:.4g}{unit} (estimated, "
+                print(f"    the record shows it from about {detectability.magnitude(row, row['shows_from'])} (estimated, "
                       f"on the model without it)" if row["shows_from"] is not None else
-                      "    the estimate of what the record shows does not reach it within its range (first order: "
-                      "a named effect beyond it was refitted further than the estimate's calibration)")
+                      "    the estimate of what the record shows does not reach it within its range (estimated, on the "
+                      "model without it)")
     for k, r in d.calibration.get("refitted_with_effects", {}).items():
         v, n = r["value"], r["nominal"]
         if n is not None and v is not None and v != n:

@@ -114,22 +114,22 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
         batch = [t for t in todo if t["next"] is not None]
         if not batch:
             break
-        specs, runs = [], []
+        specs, built = [], []
         for t in batch:
             try:
                 s = t["cand"].prepare(groups[t["group"]][0])
                 t["fp"].apply(s, t["values"][t["next"]])
-            except ValueError:          # a value the model refuses: that rung cannot be tried
-                t["gains"][t["next"]] = math.nan
-                t["hi"], t["next"] = None, None
+            except ValueError:          # a value the model refuses: that rung fails, as a diverged one does
+                built.append(False)
                 continue
             specs.append(s)
-            runs.append(t)
-        outs = _simulate_all(runner, specs, problem.n, side)
-        for t, out in zip(runs, outs):
+            built.append(True)
+        outs = iter(_simulate_all(runner, specs, problem.n, side))
+        for t, ok in zip(batch, built):
             k = t["next"]
-            g = expected_gain(problem, bases[t["group"]], out, groups[t["group"]][1], joints_of(t["cand"]), noise,
-                              pressure_noise, restart)
+            out = next(outs) if ok else None
+            g = math.nan if out is None else expected_gain(problem, bases[t["group"]], out, groups[t["group"]][1],
+                                                             joints_of(t["cand"]), noise, pressure_noise, restart)
             t["gains"][k] = g
             passes = math.isfinite(g) and g >= threshold
             if k == len(t["values"]) - 1 and not passes:
@@ -152,16 +152,20 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
     return out
 
 
+def magnitude(row: dict, value: float) -> str:
+    """``value`` of ``detectable``'s row's parameter, with its unit: 'width = 0.2812 V'."""
+    return f"{row['parameter']} = {value:.4g}" + (f" {row['unit']}" if row["unit"] else "")
+
+
 def describe(row: dict, threshold: float) -> str:
     """One line of the CLI's answer for ``detectable``'s row."""
     where = f" on {row['joint']}" if row["joint"] else ""
-    unit = f" {row['unit']}" if row["unit"] else ""
     if row["shows_from"] is None:
         top = row["tested"][-1]["expected_gain"] if row["tested"] else None
         gain = f", {top:+.2f} points there" if top is not None else ""
-        return (f"{row['effect']}{where}: not even at {row['parameter']} = {row['range_end']:.4g}{unit} (the far end of "
+        return (f"{row['effect']}{where}: not even at {magnitude(row, row['range_end'])} (the far end of "
                 f"its range{gain}, under the {threshold:g} a gain must reach)")
-    return f"{row['effect']}{where}: from about {row['parameter']} = {row['shows_from']:.4g}{unit}"
+    return f"{row['effect']}{where}: from about {magnitude(row, row['shows_from'])}"
 
 
 def _num(v):

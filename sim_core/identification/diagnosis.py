@@ -543,7 +543,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # and of each named effect on the calibrated baseline; on the window the fits rank their starts on
     # (the Jacobians' rows of the estimation window cut to it)
     rows = detectability.rows_within(est, st.grid)
-    cal_jac = cal.result.jacobian if cal.identified and cal.result.jacobian is not None else None
+    cal_jac = cal.result.jacobian if cal.identified else None
     ext_jac = final.jacobian if final is not None and selected else cal_jac
     groups = [(ext_acc, None if ext_jac is None else ext_jac[rows], [c for c in cands if (c.effect, c.joint) not in named], False)]
     if selected:
