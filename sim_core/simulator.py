@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +57,21 @@ class Trajectory:
         return cols
 
 
+@dataclass(frozen=True)
+class SimulatorState:
+    """What a later call of the kernel reads that an earlier one wrote: the context's state (XQ, XS,
+    XG, the command history HT/HU, the noise generator), its actuator parameters (AP: the command
+    chain's discretisation is cached there per substep) and the workspace (the mass matrix, bias and
+    factor kept between substeps). Restored into a simulator of the same model, the next call gives
+    the same bits as one call over both spans."""
+
+    context: tuple[np.ndarray, ...]
+    workspace: tuple[np.ndarray, ...]
+
+
+_STATE = ("XQ", "XS", "XG", "HT", "HU", "rng", "AP")
+
+
 class Simulator:
     def __init__(self, context):
         self.context = context
@@ -93,6 +109,29 @@ class Simulator:
             raise SimulationError(f"t = {c.time:.6f} s: {what}")
         return k
 
+    def save(self) -> SimulatorState:
+        """A copy of everything the next call continues from (:class:`SimulatorState`)."""
+        c = self.context
+        return SimulatorState(tuple(getattr(c, k).copy() for k in _STATE), tuple(a.copy() for a in self._ws))
+
+    def restore(self, state: SimulatorState) -> None:
+        """Continue from ``state`` (saved from a simulator of the same model: see :meth:`fingerprint`)."""
+        c = self.context
+        for k, a in zip(_STATE, state.context):
+            getattr(c, k)[...] = a
+        for dst, a in zip(self._ws, state.workspace):
+            dst[...] = a
+
+    def fingerprint(self) -> bytes:
+        """A digest of the model as the kernel sees it (the lowered parameters and tree) and of the
+        current state: two simulators with the same fingerprint run the same bits on the same input."""
+        c = self.context
+        h = hashlib.blake2b(digest_size=16)
+        for a in (c.DP, c.AP, c.GP, *(getattr(c, k) for k in _STATE[:-1]), *(a for a in self._tree() if a is not None)):
+            h.update(str(a.shape).encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.digest()
+
     def step(self, u, dt: float) -> np.ndarray:
         """Advance one output step with command ``u`` (V per actuated joint) held for ``dt`` s.
         Returns the per-actuator output row (YA_* columns), a view reused on the next call."""
@@ -109,8 +148,10 @@ class Simulator:
         self._kernel.sample_sensors(c.AP, c.XQ[0], c.XS, c.rng, row, np.zeros(na) if u is None else compiled_arg(u, float))
         return row
 
-    def run(self, times, U) -> Trajectory:
-        """Simulate on the time grid ``times`` [N] with commands ``U`` [N, n_act] (ZOH)."""
+    def run(self, times, U, first_row: np.ndarray | None = None) -> Trajectory:
+        """Simulate on the time grid ``times`` [N] with commands ``U`` [N, n_act] (ZOH). ``first_row``:
+        row 0's outputs where the state continues a run that already sampled them (a restored
+        :class:`SimulatorState`): no sensor noise is drawn for them again."""
         c = self.context
         times = np.asarray(times, dtype=float)
         U = compiled_arg(U, dtype=float)
@@ -127,7 +168,7 @@ class Simulator:
         yt = np.zeros(N)
         yt[0] = c.time
         q[0], qd[0] = c.XQ[0], c.XQ[1]
-        act[0] = self.sample(U[0])
+        act[0] = self.sample(U[0]) if first_row is None else first_row
         if N > 1:
             self._call(dts, U[:-1], yt[1:], q[1:], qd[1:], act[1:])
         act[:, :, L.YA_U] = U

@@ -19,6 +19,7 @@ apart, or 1/16 of a log-scaled range), reported as one.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -100,56 +101,83 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
     ladder searched by bisection for the smallest rung whose expected gain reaches ``threshold``, the
     top rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its
     gain is scored on; ``named`` marks the rows of the effects the diagnosis named (searched on the
-    model without them: how far above what the record shows they are). Every rung of a bisection step
-    runs side by side."""
+    model without them: how far above what the record shows they are). The candidates' searches run
+    side by side, each whole in one process (a search's next rung waits only for its own last)."""
     bases = _simulate_all(runner, [g[0].copy() for g in groups], problem.n, side)
     todo = []
     for gi, (_, _, cands, _) in enumerate(groups):
         for c in cands:
             values = rungs(c.free[0]) if c.free else []
             if values:
-                todo.append({"group": gi, "cand": c, "fp": c.free[0], "values": values, "gains": {}, "lo": -1,
-                             "hi": len(values) - 1, "next": len(values) - 1})
-    while True:
-        batch = [t for t in todo if t["next"] is not None]
-        if not batch:
-            break
-        specs, built = [], []
-        for t in batch:
-            try:
-                s = t["cand"].prepare(groups[t["group"]][0])
-                t["fp"].apply(s, t["values"][t["next"]])
-            except ValueError:          # a value the model refuses: that rung fails, as a diverged one does
-                built.append(False)
-                continue
-            specs.append(s)
-            built.append(True)
-        outs = iter(_simulate_all(runner, specs, problem.n, side))
-        for t, ok in zip(batch, built):
-            k = t["next"]
-            out = next(outs) if ok else None
-            g = math.nan if out is None else expected_gain(problem, bases[t["group"]], out, groups[t["group"]][1],
-                                                             joints_of(t["cand"]), noise, pressure_noise, restart)
-            t["gains"][k] = g
-            passes = math.isfinite(g) and g >= threshold
-            if k == len(t["values"]) - 1 and not passes:
-                t["hi"] = None                      # not even at the far end of the range
-            elif passes:
-                t["hi"] = k
-            else:
-                t["lo"] = k
-            t["next"] = None if t["hi"] is None or t["hi"] - t["lo"] <= 1 else (t["lo"] + t["hi"]) // 2
+                todo.append((gi, c, values))
+    search = _Search(groups, bases, runner, problem, joints_of, threshold, noise, pressure_noise, restart, todo)
+    indices = list(range(len(todo)))
+    found = side.map(_bisect, indices, hold=search) if side is not None else [search.bisect(i) for i in indices]
     out = []
-    for t in todo:
-        c, fp = t["cand"], t["fp"]
+    for (gi, c, values), (hi, gains) in zip(todo, found):
+        fp = c.free[0]
         name = fp.key.split(".")[-1]
         out.append({
             "effect": c.effect, "joint": c.joint, "parameter": name, "unit": fp.unit, "null": _num(fp.null),
-            "named": bool(groups[t["group"]][3]), "range_end": _num(t["values"][-1]),
-            "shows_from": None if t["hi"] is None else _num(t["values"][t["hi"]]),
-            "tested": [{"value": _num(t["values"][k]), "expected_gain": _num(g)} for k, g in sorted(t["gains"].items())],
+            "named": bool(groups[gi][3]), "range_end": _num(values[-1]),
+            "shows_from": None if hi is None else _num(values[hi]),
+            "tested": [{"value": _num(values[k]), "expected_gain": _num(g)} for k, g in sorted(gains.items())],
         })
     return out
+
+
+@dataclass
+class _Search:
+    """What every candidate's bisection reads (held by the processes that run them side by side)."""
+
+    groups: list[tuple]
+    bases: list[Outputs]
+    runner: object
+    problem: Problem
+    joints_of: object
+    threshold: float
+    noise: dict[str, float]
+    pressure_noise: dict[str, float]
+    restart: int
+    todo: list[tuple]          # (group index, candidate, ladder values)
+
+    def gain(self, gi: int, cand, value: float) -> float:
+        """The expected gain of ``cand`` at ``value`` over group ``gi``'s model (nan: the model refuses
+        the value, or diverges there)."""
+        model, jacobian = self.groups[gi][0], self.groups[gi][1]
+        try:
+            s = cand.prepare(model)
+            cand.free[0].apply(s, value)
+        except ValueError:          # a value the model refuses: that rung fails, as a diverged one does
+            return math.nan
+        out = self.runner.simulate(s, self.problem.n, owned=True)
+        return expected_gain(self.problem, self.bases[gi], out, jacobian, self.joints_of(cand), self.noise,
+                             self.pressure_noise, self.restart)
+
+    def bisect(self, i: int) -> tuple[int | None, dict[int, float]]:
+        """Candidate ``i``'s ladder: (index of the smallest rung that reaches the threshold, None: not
+        even the top one; the expected gain of every rung tried)."""
+        gi, cand, values = self.todo[i]
+        gains: dict[int, float] = {}
+        lo, hi, k = -1, len(values) - 1, len(values) - 1
+        while k is not None:
+            g = self.gain(gi, cand, values[k])
+            gains[k] = g
+            passes = math.isfinite(g) and g >= self.threshold
+            if k == len(values) - 1 and not passes:
+                hi = None                           # not even at the far end of the range
+            elif passes:
+                hi = k
+            else:
+                lo = k
+            k = None if hi is None or hi - lo <= 1 else (lo + hi) // 2
+        return hi, gains
+
+
+def _bisect(i: int):
+    from .side_by_side import held
+
+    return held().bisect(i)
 
 
 def magnitude(row: dict, value: float) -> str:

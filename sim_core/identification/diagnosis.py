@@ -397,7 +397,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         def checked(accepted, model):
             return final_check(
                 accepted, model, refit=refit, log=log, needed=needed,
-                worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept),
+                worth=lambda fit, chosen: _contributions(base_fast, fit.spec, chosen, vaccurate, vprob, side, kept,
+                                                         resume=fit.outputs),
                 remove=lambda fit, ev: without(base_fast, fit.spec, ev.candidate))
 
         chosen, final = checked(sel.accepted, sel.model)
@@ -596,13 +597,15 @@ def _pct(v: float):
 
 
 def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, prob: oe.Problem, side: SideBySide,
-                   kept: dict) -> list[float]:
+                   kept: dict, resume: Outputs | None = None) -> list[float]:
     """Validation score (points) each chosen effect is worth in ``model``: the score with it minus
     the score with it removed, on the joints it acts on. The simulations run side by side, with the
     baseline's on the first call; ``kept`` keeps the baseline's output ("base") and the model's
-    ("model", "out") for the report, and the model's without each effect ("without")."""
+    ("model", "out") for the report, and the model's without each effect ("without"). ``resume``:
+    the model's fit outputs, which its validation run may continue (Runner.simulate)."""
     specs = [model] + [without(base_spec, model, ev.candidate) for ev in chosen]
-    outs = side.simulate(runner, specs + ([] if "base" in kept else [base_spec]), prob.n)
+    specs += [] if "base" in kept else [base_spec]
+    outs = side.simulate(runner, specs, prob.n, resume=[resume] + [None] * (len(specs) - 1))
     if "base" not in kept:
         kept["base"] = outs.pop()
     kept["model"], kept["out"], kept["without"] = model, outs[0], outs[1:]

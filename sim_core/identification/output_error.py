@@ -191,6 +191,9 @@ class FitResult:
     # the cost that one unit of a parameter's (value/sigma)^2 is worth: s^2 N/N_eff (add_uncertainty's);
     # how far the cost must rise when parameters are reset for the record to have identified them
     cost_scale: float | None = None
+    # the simulation at the optimum, where a least-squares evaluation made it: it carries its end, so a
+    # longer run of the fitted model continues from it (Runner.simulate(resume=))
+    outputs: Outputs | None = None
 
     def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
         """'lower'/'upper' when the estimate sits on a search bound, else None."""
@@ -305,7 +308,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         r = problem.residuals(out)
         c = float(r @ r)
         if c < best["cost"]:
-            best.update(cost=c, x=np.array(x, dtype=float), r=r)
+            best.update(cost=c, x=np.array(x, dtype=float), r=r, out=out)
         return r
 
     def resid(x):
@@ -316,7 +319,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             s = spec_at(x)
         except ValueError:
             return failed()
-        r = scored(x, runner.simulate(s, problem.n, owned=True))
+        r = scored(x, runner.simulate(s, problem.n, owned=True, keep_end=True))
         last.update(x=np.array(x, dtype=float), r=r)
         return r
 
@@ -409,7 +412,8 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
         pass
     x = best["x"]
     values = {fp.key: fp.from_x(float(xi)) for fp, xi in zip(free, x)}
-    out = FitResult(free, values, best["cost"], sims=sims[0], spec=spec_at(x), x=x, residual=best["r"], start_spec=spec)
+    out = FitResult(free, values, best["cost"], sims=sims[0], spec=spec_at(x), x=x, residual=best["r"], start_spec=spec,
+                    outputs=best.get("out"))
     if best["r"] is None:
         out.ok = False
         return out

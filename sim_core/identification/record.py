@@ -13,6 +13,7 @@ depends on the true pose (gravity load, lever arms, end stops), not from where t
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +46,17 @@ class Record:
     initial_pose: dict[str, float]        # joint -> start angle: a reading (pose_kind 'reading') or the pose
     notes: list[str] = field(default_factory=list)
     pose_kind: str = "reading"            # 'reading': initial_pose holds first readings; 'true': joint positions
+    _digest: bytes | None = field(default=None, init=False, repr=False, compare=False)
+
+    def digest(self) -> bytes:
+        """A digest of the time grid and the commands: what a simulation on this record reads."""
+        if self._digest is None:
+            h = hashlib.blake2b(digest_size=16)
+            for a in (self.time, self.U):
+                h.update(str(a.shape).encode())
+                h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+            self._digest = h.digest()
+        return self._digest
 
     @property
     def n(self) -> int:

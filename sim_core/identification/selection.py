@@ -158,7 +158,7 @@ def evaluate(st: Setting, cand: Candidate, base_spec, accepted: list[tuple[Candi
     res = oe.fit(st.est_runner, st.est, s0, free, grid=grid, grid_problem=st.grid,
                  max_sims=st.budget(len(free), len(grid), fits=1 if second is None else 2), uncertainty=False,
                  tol=1e-3, grid_start_too=bool(accepted) and not cand.existing, second_family=second)
-    out = st.val_runner.simulate(res.spec, st.val.n)
+    out = st.val_runner.simulate(res.spec, st.val.n, resume=res.outputs)
     if (not out.ok or not base_out.ok) and st.val_runner.substep is not None:
         # the fast integrator step was checked on the calibrated baseline, not on every fitted candidate
         # or recalibrated model: where either diverges there, both are scored at the default step
@@ -447,7 +447,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             hit = refits.get((id(model), id(ev)))
             if hit is not None and hit[0] is model and hit[1] is ev:
                 return hit[2]
-            res = _refit_rest(st, base_spec, model, ev, rest)
+            res = base.fitted(_refit_rest(st, base_spec, model, ev, rest))
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return refits[(id(model), id(ev))][2]
 
@@ -468,7 +468,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     replaced: list[tuple] = []
     if stand_ins and accepted:
         def refit_instead(model, ev, rest, fp):
-            res = _refit_rest(st, base_spec, model, ev, rest, instead=fp)
+            res = base.fitted(_refit_rest(st, base_spec, model, ev, rest, instead=fp))
             return res.spec, base.score(res.spec), float(res.values[fp.key]), res.at_bound(fp.key)
 
         model, accepted, replaced = stand_in(accepted, model, base.score(model),
@@ -480,7 +480,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             stopped += f"; {fp.key} calibrated in place of {ev.candidate.label} (= {value:.4g})"
     if accepted:
         def refit_held(model, ev, p, value):
-            res = _refit_held(st, model, accepted, ev, p, value)
+            res = base.fitted(_refit_held(st, model, accepted, ev, p, value))
             if not res.ok:
                 return model, -math.inf, {}
             return res.spec, base.score(res.spec), res.values
@@ -575,22 +575,40 @@ def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: 
                  side=side, second_family=1 if len(starts) > 1 else None)
     if not res.ok or res.spec is None:
         return model, None
+    base.fitted(res)
     before, after = base.score(model), base.score(res.spec)
     return (res.spec, (before, after)) if after > before else (model, None)
 
 
 class _Baseline:
-    """The current model's validation outputs, score and estimation cost (simulated once per model)."""
+    """The validation outputs, score and estimation cost of the models the search compares (each
+    simulated once, the last few kept); a model that a fit returned continues that fit's simulation
+    of the estimation window (:meth:`fitted`)."""
+
+    KEEP = 6
 
     def __init__(self, st: Setting):
         self.st = st
         self._out: dict[int, tuple] = {}
+        self._fits: dict[int, tuple] = {}
+
+    def fitted(self, res: oe.FitResult) -> oe.FitResult:
+        """Remember ``res.spec``'s estimation-window outputs (the fit's, at its optimum); returns ``res``."""
+        if res.spec is not None and res.outputs is not None:
+            self._fits[id(res.spec)] = (res.spec, res.outputs)
+            _keep_last(self._fits, self.KEEP)
+        return res
+
+    def _fit_outputs(self, model) -> Outputs | None:
+        hit = self._fits.get(id(model))
+        return hit[1] if hit is not None and hit[0] is model else None
 
     def outputs(self, model) -> Outputs:
         hit = self._out.get(id(model))
         if hit is None or hit[0] is not model:
-            hit = (model, self.st.val_runner.simulate(model, self.st.val.n))
-            self._out = {id(model): hit}
+            hit = (model, self.st.val_runner.simulate(model, self.st.val.n, resume=self._fit_outputs(model)))
+            self._out[id(model)] = hit
+            _keep_last(self._out, self.KEEP)
         return hit[1]
 
     def score(self, model) -> float:
@@ -598,7 +616,13 @@ class _Baseline:
 
     def cost(self, model) -> float:
         st = self.st
-        return float(np.sum(st.est.residuals(st.est_runner.simulate(model, st.est.n)) ** 2))
+        out = st.est_runner.simulate(model, st.est.n, resume=self._fit_outputs(model))
+        return float(np.sum(st.est.residuals(out) ** 2))
+
+
+def _keep_last(d: dict, n: int) -> None:
+    while len(d) > n:
+        del d[next(iter(d))]
 
 
 def without(base_spec, model, cand: Candidate):

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..plant import Plant
-from ..simulator import SimulationError, Simulator
+from ..simulator import SimulationError, Simulator, SimulatorState
 from .metrics import nrmse_fit, velocity
 from .record import Record, start_position
 
@@ -25,6 +25,18 @@ PRESSURE_TOLERANCE = 1.0     # fit points of a chamber pressure, when the record
                              # contact makes pressures far more sensitive to the step than angles)
 
 
+@dataclass(frozen=True)
+class End:
+    """Where a simulation on a record ended, to continue it (``Runner.simulate(resume=)``): a fit's
+    estimation window is the first part of the record its validation window is scored on, so the
+    validation run of the fitted model goes on from there instead of simulating it again."""
+
+    key: bytes              # the model and initial state as the kernel saw them, the record, the step
+    index: int              # the sample the state is at (the last one simulated)
+    state: SimulatorState
+    row: np.ndarray         # the outputs row of that sample
+
+
 @dataclass
 class Outputs:
     """Simulated channels on the record's time grid (None where the simulation failed)."""
@@ -32,6 +44,7 @@ class Outputs:
     angles: dict[str, np.ndarray]
     pressures: dict[str, tuple[np.ndarray, np.ndarray]]
     ok: bool = True
+    end: End | None = None  # with ``Runner.simulate(keep_end=True)``
 
 
 def model_spec(spec):
@@ -52,9 +65,14 @@ class Runner:
         self.substep = substep
         self.calls = 0
 
-    def simulate(self, spec, n: int | None = None, rec: Record | None = None, owned: bool = False) -> Outputs:
+    def simulate(self, spec, n: int | None = None, rec: Record | None = None, owned: bool = False,
+                 keep_end: bool = False, resume: Outputs | None = None) -> Outputs:
         """Run ``spec`` (already a model spec) over the first ``n`` samples of the record; ``owned``:
-        the caller's private copy, which may be changed (saves a copy per simulation)."""
+        the caller's private copy, which may be changed (saves a copy per simulation). ``keep_end``:
+        the outputs carry where the run ended (:class:`End`). ``resume``: the outputs of an earlier
+        run of the same model on the same record with that end; when model, record and step match,
+        this run takes its samples and simulates only the rest (the same bits as simulating them
+        all), otherwise it simulates them all."""
         rec = rec or self.rec
         n = rec.n if n is None else n
         s = spec if owned else spec.copy()
@@ -65,15 +83,39 @@ class Runner:
         self.calls += 1
         try:
             ctx = Plant(s).create_context(s, seed=0, owned=True)     # s is this call's own copy
-            traj = Simulator(ctx).run(rec.time[:n], rec.U[:n])
+            sim = Simulator(ctx)
+            key = _key(sim, rec) if keep_end or resume is not None else b""
+            end = resume.end if resume is not None and resume.ok and resume.end is not None else None
+            if end is not None and end.key == key and end.index >= n - 1:      # the run had these samples
+                return Outputs({j: y[:n] for j, y in resume.angles.items()},
+                               {j: (pa[:n], pb[:n]) for j, (pa, pb) in resume.pressures.items()},
+                               end=end if keep_end and end.index == n - 1 else None)
+            if end is not None and end.key == key:
+                sim.restore(end.state)
+                m = end.index
+                traj = sim.run(rec.time[m:n], rec.U[m:n], first_row=end.row)
+                angles = {j: np.concatenate((resume.angles[j][:m], traj.angle(j))) for j in rec.angles}
+                pressures = {j: (np.concatenate((resume.pressures[j][0][:m], traj.pressure(j, "a"))),
+                                 np.concatenate((resume.pressures[j][1][:m], traj.pressure(j, "b"))))
+                             for j in rec.pressures}
+            else:
+                traj = sim.run(rec.time[:n], rec.U[:n])
+                angles = {j: traj.angle(j) for j in rec.angles}
+                pressures = {j: (traj.pressure(j, "a"), traj.pressure(j, "b")) for j in rec.pressures}
         except (SimulationError, ValueError, ArithmeticError):
             return Outputs({}, {}, ok=False)
-        angles = {j: traj.angle(j) for j in rec.angles}
-        pressures = {j: (traj.pressure(j, "a"), traj.pressure(j, "b")) for j in rec.pressures}
         for y in angles.values():
             if not np.all(np.isfinite(y)):
                 return Outputs({}, {}, ok=False)
+        if keep_end:
+            return Outputs(angles, pressures, end=End(key, n - 1, sim.save(), traj.act[-1].copy()))
         return Outputs(angles, pressures)
+
+
+def _key(sim: Simulator, rec: Record) -> bytes:
+    """What must match for a run to continue another: the model and initial state (the simulator's
+    fingerprint, the step included) and the record's time grid and commands."""
+    return sim.fingerprint() + rec.digest()
 
 
 def compare_outputs(ref: Outputs, out: Outputs, rec: Record) -> dict:
