@@ -43,8 +43,7 @@ def _spec(**settings):
     return s
 
 
-@pytest.mark.parametrize("settings", [{}, {"integrator.rigid_body_refresh": 7.0}, {"integrator.max_substep": 2e-3}],
-                         ids=["default", "refresh_every_7_substeps", "coarse_substep"])
+@pytest.mark.parametrize("settings", [{}, {"integrator.max_substep": 2e-3}], ids=["default", "coarse_substep"])
 def test_a_restored_simulator_continues_with_the_bits_of_one_run(record, settings):
     spec = _spec(**settings)
     n, m = record.n, record.n // 2 + 37
@@ -63,7 +62,7 @@ def test_a_restored_simulator_continues_with_the_bits_of_one_run(record, setting
 def test_without_the_saved_state_the_continuation_differs(record):
     """The check above can fail: a fresh simulator started from the state alone (not the cached
     command-chain discretisation, not the workspace) gives other bits."""
-    spec = _spec(**{"integrator.rigid_body_refresh": 7.0})
+    spec = _spec()
     n, m = record.n, record.n // 2 + 37
     whole = Simulator(Plant(spec).create_context(seed=4)).run(record.time, record.U)
     first = Simulator(Plant(spec).create_context(seed=4))

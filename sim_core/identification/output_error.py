@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .metrics import effective_samples, nrmse_fit, smoothed, velocity
+from .metrics import effective_samples, nrmse_fit, savgol_window, smoothed, velocity
 from .parameters import FreeParameter
 from .record import Record
 from .simulation import Outputs, Runner
@@ -88,13 +88,24 @@ class Problem:
         baseline calibration already absorbed."""
         if not out.ok:
             return FAIL_RESIDUAL ** 2, {}
+        return self._profiled(out, None)
+
+    def profiled_bound(self, out: Outputs) -> float:
+        """A lower bound of :meth:`profiled_cost` from the outputs of a run stopped early (its first
+        samples): every term of the cost is a sum over samples, so the best rescaling of the samples
+        so far costs no more than any rescaling of them all does there. The last half window of the
+        smoothed velocity is left out: there it depends on samples still to come."""
+        n = min(y.size for y in out.angles.values()) - self.start - savgol_window(self.rec.rate) // 2
+        return self._profiled(out, max(n, 0))[0]
+
+    def _profiled(self, out: Outputs, stop: int | None) -> tuple[float, dict[str, float]]:
         sim = self.simulated(out)
         cost = 0.0
         scales = {}
         for j in self.joints:
             ya = out.angles[j][0]
-            pairs = [((j, "angle"), sim[(j, "angle")] - ya, self.meas[(j, "angle")] - ya),
-                     ((j, "velocity"), sim[(j, "velocity")], self.meas[(j, "velocity")])]
+            pairs = [((j, "angle"), sim[(j, "angle")][:stop] - ya, self.meas[(j, "angle")][:stop] - ya),
+                     ((j, "velocity"), sim[(j, "velocity")][:stop], self.meas[(j, "velocity")][:stop])]
             num = den = 0.0
             for k, x, m in pairs:
                 w = self.weight[k] / self.scale[k] ** 2
@@ -107,7 +118,7 @@ class Problem:
                 cost += self.weight[k] * float(r @ r) / self.scale[k] ** 2
             for ch in ("p_a", "p_b"):
                 if (j, ch) in self.meas:
-                    r = self.meas[(j, ch)] - sim[(j, ch)]
+                    r = self.meas[(j, ch)][:stop] - sim[(j, ch)][:stop]
                     cost += self.weight[(j, ch)] * float(r @ r) / self.scale[(j, ch)] ** 2
         return cost, scales
 
@@ -299,6 +310,13 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
     def spec_at(x):
         return _spec_at(spec, free, x)
 
+    def spec_at_or_none(x):
+        """The spec at ``x``, or None where the model refuses the values (ValueError)."""
+        try:
+            return spec_at(x)
+        except ValueError:
+            return None
+
     last: dict = {}
 
     def failed():          # the residual of a model spec_at refuses
@@ -362,18 +380,8 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             # flow gains where the best point's profile put them
             gp = grid_problem or problem
             starts.append(x0)
-            costs, profiles = [], []
-            for x in starts:
-                if sims[0] >= max_sims:
-                    raise _Budget
-                sims[0] += 1
-                try:
-                    out_g = runner.simulate(spec_at(x), gp.n, owned=True)
-                except ValueError:
-                    out_g = Outputs({}, {}, ok=False)
-                c, scales = gp.profiled_cost(out_g)
-                costs.append(c)
-                profiles.append(scales)
+            costs, profiles = _rank(runner, gp, [spec_at_or_none(x) for x in starts],
+                                    _rank_groups(len(starts), second_family, grid_start_too), sims, max_sims)
 
             def profiled(i):
                 x_start = starts[i].copy()
@@ -420,6 +428,48 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
     if uncertainty and free:
         add_uncertainty(out, runner, problem, side)
     return out
+
+
+def _rank_groups(count: int, second_family: int | None, grid_start_too: bool) -> list[int]:
+    """The starts whose best :func:`fit` may pick, as group numbers: with one family and no second
+    look at the grid, only the best of all counts; otherwise the best of the first family's grid
+    points, of the second family's and the current values (last) each may."""
+    last = count - 1
+    families = second_family is not None and second_family < last
+    if not (families or grid_start_too):
+        return [0] * count
+    split = second_family if families else last
+    return [0 if k < split else 1 for k in range(last)] + [2]
+
+
+def _rank(runner, gp: Problem, specs: list, groups: list[int], sims: list, max_sims: int) -> tuple[list, list]:
+    """(profiled cost, flow-gain scales) of every starting point (``specs``: None where the model
+    refused it), simulated on ``gp``'s window. A run whose cost is sure to exceed the best of its
+    group so far (its early samples' profiled cost already does: Problem.profiled_bound) is abandoned
+    and ranks last; the current values (last), a strong start, go first where all starts compete.
+    ``sims``: the fit's simulation count (each start counts one, abandoned or not)."""
+    count = len(specs)
+    if sims[0] + count > max_sims:       # the budget ends the ranking: as many as it allows, in order
+        order, abandon = list(range(count)), False
+    else:
+        order, abandon = ([count - 1] + list(range(count - 1)) if len(set(groups)) == 1 else list(range(count))), True
+    costs, profiles = [math.inf] * count, [{}] * count
+    best: dict[int, float] = {}
+    for k in order:
+        if sims[0] >= max_sims:
+            raise _Budget
+        sims[0] += 1
+        limit = best.get(groups[k], math.inf)
+        stop = None
+        if abandon and math.isfinite(limit):
+            def stop(partial, limit=limit):
+                return gp.profiled_bound(partial) > limit * (1.0 + 1e-9)
+        out_g = Outputs({}, {}, ok=False) if specs[k] is None else runner.simulate(specs[k], gp.n, owned=True, abandon=stop)
+        if out_g.abandoned:
+            continue
+        costs[k], profiles[k] = gp.profiled_cost(out_g)
+        best[groups[k]] = min(limit, costs[k])
+    return costs, profiles
 
 
 def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:

@@ -45,6 +45,7 @@ class Outputs:
     pressures: dict[str, tuple[np.ndarray, np.ndarray]]
     ok: bool = True
     end: End | None = None  # with ``Runner.simulate(keep_end=True)``
+    abandoned: bool = False  # stopped early by ``Runner.simulate(abandon=)`` (not ok, not failed)
 
 
 def model_spec(spec):
@@ -66,13 +67,15 @@ class Runner:
         self.calls = 0
 
     def simulate(self, spec, n: int | None = None, rec: Record | None = None, owned: bool = False,
-                 keep_end: bool = False, resume: Outputs | None = None) -> Outputs:
+                 keep_end: bool = False, resume: Outputs | None = None, abandon=None) -> Outputs:
         """Run ``spec`` (already a model spec) over the first ``n`` samples of the record; ``owned``:
         the caller's private copy, which may be changed (saves a copy per simulation). ``keep_end``:
         the outputs carry where the run ended (:class:`End`). ``resume``: the outputs of an earlier
         run of the same model on the same record with that end; when model, record and step match,
         this run takes its samples and simulates only the rest (the same bits as simulating them
-        all), otherwise it simulates them all."""
+        all), otherwise it simulates them all. ``abandon(outputs so far)``: asked after each of
+        ``PIECES`` pieces of the run; True stops it (``Outputs.abandoned``; the pieces give the bits
+        of one run)."""
         rec = rec or self.rec
         n = rec.n if n is None else n
         s = spec if owned else spec.copy()
@@ -84,32 +87,79 @@ class Runner:
         try:
             ctx = Plant(s).create_context(s, seed=0, owned=True)     # s is this call's own copy
             sim = Simulator(ctx)
-            key = _key(sim, rec) if keep_end or resume is not None else b""
-            end = resume.end if resume is not None and resume.ok and resume.end is not None else None
-            if end is not None and end.key == key and end.index >= n - 1:      # the run had these samples
+            # pieces continue with the same bits where the rigid body is refreshed once per output step
+            # (every robot's setting; Simulator.save); otherwise the run is one piece
+            pieces = s.integrator["rigid_body_refresh"] <= 0
+            key = _key(sim, rec) if pieces and (keep_end or resume is not None) else b""
+            end = resume.end if pieces and resume is not None and resume.ok else None
+            if end is None or end.key != key:
+                end = None
+            elif end.index >= n - 1:        # the earlier run had these samples
                 return Outputs({j: y[:n] for j, y in resume.angles.items()},
                                {j: (pa[:n], pb[:n]) for j, (pa, pb) in resume.pressures.items()},
                                end=end if keep_end and end.index == n - 1 else None)
-            if end is not None and end.key == key:
-                sim.restore(end.state)
-                m = end.index
-                traj = sim.run(rec.time[m:n], rec.U[m:n], first_row=end.row)
-                angles = {j: np.concatenate((resume.angles[j][:m], traj.angle(j))) for j in rec.angles}
-                pressures = {j: (np.concatenate((resume.pressures[j][0][:m], traj.pressure(j, "a"))),
-                                 np.concatenate((resume.pressures[j][1][:m], traj.pressure(j, "b"))))
-                             for j in rec.pressures}
-            else:
-                traj = sim.run(rec.time[:n], rec.U[:n])
-                angles = {j: traj.angle(j) for j in rec.angles}
-                pressures = {j: (traj.pressure(j, "a"), traj.pressure(j, "b")) for j in rec.pressures}
+            run = _Run(sim, rec)
+            if end is not None:
+                run.resume(resume, end)
+            stops = [n] if abandon is None or not pieces else \
+                [run.have + (n - run.have) * k // PIECES for k in range(1, PIECES + 1)]
+            for stop in stops:
+                run.to(stop)
+                if stop < n and abandon(run.outputs()):
+                    return Outputs({}, {}, ok=False, abandoned=True)
         except (SimulationError, ValueError, ArithmeticError):
             return Outputs({}, {}, ok=False)
-        for y in angles.values():
+        out = run.outputs()
+        for y in out.angles.values():
             if not np.all(np.isfinite(y)):
                 return Outputs({}, {}, ok=False)
-        if keep_end:
-            return Outputs(angles, pressures, end=End(key, n - 1, sim.save(), traj.act[-1].copy()))
-        return Outputs(angles, pressures)
+        if keep_end and pieces:
+            out.end = End(key, n - 1, sim.save(), run.row.copy())
+        return out
+
+
+PIECES = 4     # a run that may be abandoned is asked after each quarter
+
+
+class _Run:
+    """One simulation on a record, advanced in pieces: the outputs so far, and the last row."""
+
+    def __init__(self, sim: Simulator, rec: Record):
+        self.sim, self.rec = sim, rec
+        self.have = 0                # samples [0, have) simulated
+        self.row = None              # the outputs row of sample have - 1
+        self.angles = {j: [] for j in rec.angles}
+        self.pressures = {j: ([], []) for j in rec.pressures}
+
+    def resume(self, out: Outputs, end: End) -> None:
+        """Continue from ``end``, the end of ``out``'s run."""
+        self.sim.restore(end.state)
+        self.have, self.row = end.index + 1, end.row
+        for j, parts in self.angles.items():
+            parts.append(out.angles[j][: self.have])
+        for j, (pa, pb) in self.pressures.items():
+            pa.append(out.pressures[j][0][: self.have])
+            pb.append(out.pressures[j][1][: self.have])
+
+    def to(self, stop: int) -> None:
+        """Simulate samples [have, stop)."""
+        first = max(self.have - 1, 0)            # the run goes on from the last sample it has
+        traj = self.sim.run(self.rec.time[first:stop], self.rec.U[first:stop], first_row=self.row)
+        new = slice(1 if self.have else 0, None)
+        for j, parts in self.angles.items():
+            parts.append(traj.angle(j)[new])
+        for j, (pa, pb) in self.pressures.items():
+            pa.append(traj.pressure(j, "a")[new])
+            pb.append(traj.pressure(j, "b")[new])
+        self.have, self.row = stop, traj.act[-1]
+
+    def outputs(self) -> Outputs:
+        return Outputs({j: _joined(p) for j, p in self.angles.items()},
+                       {j: (_joined(pa), _joined(pb)) for j, (pa, pb) in self.pressures.items()})
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 def _key(sim: Simulator, rec: Record) -> bytes:
