@@ -44,7 +44,7 @@ class Model:
         self.meas = {("j", "angle"): self.y}
 
     # the runner
-    def simulate(self, spec, n, owned=False):
+    def simulate(self, spec, n, owned=False, **_):
         return Out(spec[C] * spec[P] * self.u + spec[B] * self.w + spec[Z])
 
     # the problem

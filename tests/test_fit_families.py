@@ -51,12 +51,13 @@ class Values(dict):
 class Out:
     spec: Values
     ok: bool = True
+    abandoned: bool = False     # a whole 'run' every time: the ranking's early stop is another test's
 
 
 class EchoRunner:
     """'Simulates' a spec by handing its values on to the cost."""
 
-    def simulate(self, spec, n=None, owned=False):
+    def simulate(self, spec, n=None, owned=False, **_):
         return Out(spec.copy())
 
 
@@ -130,9 +131,9 @@ class OffsetLog(Runner):
         super().__init__(rec)
         self.offsets = []
 
-    def simulate(self, spec, n=None, rec=None, owned=False):
+    def simulate(self, spec, n=None, rec=None, owned=False, **kw):
         self.offsets.append(float(FreeParameter(OFFSET_KEY, -0.5, 0.5).get(spec)))
-        return super().simulate(spec, n, rec, owned)
+        return super().simulate(spec, n, rec, owned, **kw)
 
 
 def test_a_candidate_is_fitted_from_both_families_of_starts():

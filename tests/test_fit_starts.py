@@ -83,10 +83,10 @@ class LeakLog(Runner):
         super().__init__(rec)
         self.leaks = []
 
-    def simulate(self, spec, n=None, rec=None, owned=False):
+    def simulate(self, spec, n=None, rec=None, owned=False, **kw):
         inst = find_effect(spec, "leakage", JOINT)
         self.leaks.append(inst.params["internal"] if inst is not None else 0.0)
-        return super().simulate(spec, n, rec, owned)
+        return super().simulate(spec, n, rec, owned, **kw)
 
 
 def test_beside_accepted_effects_a_candidate_starts_from_its_grid(record):

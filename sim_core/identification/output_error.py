@@ -464,9 +464,14 @@ def _rank(runner, gp: Problem, specs: list, groups: list[int], sims: list, max_s
         if abandon and math.isfinite(limit):
             def stop(partial, limit=limit):
                 return gp.profiled_bound(partial) > limit * (1.0 + 1e-9)
-        out_g = Outputs({}, {}, ok=False) if specs[k] is None else runner.simulate(specs[k], gp.n, owned=True, abandon=stop)
-        if out_g.abandoned:
-            continue
+        if specs[k] is None:
+            out_g = Outputs({}, {}, ok=False)
+        elif stop is None:
+            out_g = runner.simulate(specs[k], gp.n, owned=True)
+        else:
+            out_g = runner.simulate(specs[k], gp.n, owned=True, abandon=stop)
+            if out_g.abandoned:
+                continue
         costs[k], profiles[k] = gp.profiled_cost(out_g)
         best[groups[k]] = min(limit, costs[k])
     return costs, profiles
