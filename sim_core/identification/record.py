@@ -47,6 +47,7 @@ class Record:
     notes: list[str] = field(default_factory=list)
     pose_kind: str = "reading"            # 'reading': initial_pose holds first readings; 'true': joint positions
     _digest: bytes | None = field(default=None, init=False, repr=False, compare=False)
+    _dt: float | None = field(default=None, init=False, repr=False, compare=False)
 
     def digest(self) -> bytes:
         """A digest of the time grid and the commands: what a simulation on this record reads."""
@@ -64,11 +65,14 @@ class Record:
 
     @property
     def rate(self) -> float:
-        return 1.0 / float(np.median(np.diff(self.time)))
+        return 1.0 / self.dt
 
     @property
     def dt(self) -> float:
-        return float(np.median(np.diff(self.time)))
+        """The median sample interval (s), computed once: every fit's velocity channel asks for it."""
+        if self._dt is None:
+            self._dt = float(np.median(np.diff(self.time)))
+        return self._dt
 
     @property
     def targets(self) -> list[str]:
