@@ -10,7 +10,7 @@ import numpy as np
 from .dynamics.compiled_arg import compiled_arg
 from .kernel import layout as L
 from .kernel.compose import kernel
-from .kernel.workspace import make_workspace, tree_arrays
+from .kernel.workspace import STALE, make_workspace, tree_arrays
 
 
 class SimulationError(RuntimeError):
@@ -79,6 +79,7 @@ class Simulator:
         n, na = ctx.spec.tree.n, len(ctx.spec.joints)
         self._kernel = kernel()
         self._ws = make_workspace(n, na)
+        self._factored_for = ctx.lowered        # the parameters the workspace's factor was made for
         self._tree_made = None
         # one-step buffers for the real-time loop (no allocation per tick)
         self._dt1 = np.zeros(1)
@@ -99,6 +100,10 @@ class Simulator:
 
     def _call(self, dts, U, Yt, Yq, Yqd, Ya) -> int:
         c = self.context
+        if self._factored_for is not c.lowered:
+            # new parameters (a lock, a fault cleared) since the last call: the factor is renewed
+            self._ws.Dfac[:] = STALE
+            self._factored_for = c.lowered
         k = self._kernel.advance(dts, U, self._tree(), c.DP, c.AP, c.GP, c.XQ, c.XS, c.XG, c.HT, c.HU, c.rng,
                                  self._ws, Yt, Yq, Yqd, Ya)
         err = int(c.XG[L.XG_ERROR])
@@ -121,6 +126,7 @@ class Simulator:
             getattr(c, k)[...] = a
         for dst, a in zip(self._ws, state.workspace):
             dst[...] = a
+        self._factored_for = c.lowered
 
     def fingerprint(self) -> bytes:
         """A digest of the model as the kernel sees it (the lowered parameters and tree) and of the

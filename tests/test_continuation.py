@@ -8,7 +8,7 @@ import pytest
 
 from sim_core.dataset import Dataset
 from sim_core.excitation import multilevel_prbs
-from sim_core.kernel.layout import YA_SENS_V
+from sim_core.kernel.layout import XG_FACTORS, YA_SENS_V
 from sim_core.identification import output_error as oe
 from sim_core.identification.parameters import free_parameter
 from sim_core.identification.record import record_from_dataset
@@ -43,11 +43,14 @@ def _spec(**settings):
     return s
 
 
-@pytest.mark.parametrize("settings", [{}, {"integrator.max_substep": 2e-3}], ids=["default", "coarse_substep"])
+@pytest.mark.parametrize("settings", [{}, {"integrator.max_substep": 2e-3},
+                                      {"integrator.rigid_body_refresh": 7.0, "integrator.jacobian_tolerance": 1e-3}],
+                         ids=["default", "coarse_substep", "refresh_every_7_substeps_factor_kept"])
 def test_a_restored_simulator_continues_with_the_bits_of_one_run(record, settings):
     spec = _spec(**settings)
     n, m = record.n, record.n // 2 + 37
-    whole = Simulator(Plant(spec).create_context(seed=4)).run(record.time, record.U)
+    whole_ctx = Plant(spec).create_context(seed=4)
+    whole = Simulator(whole_ctx).run(record.time, record.U)
     first = Simulator(Plant(spec).create_context(seed=4))
     head = first.run(record.time[:m], record.U[:m])
     later = Simulator(Plant(spec).create_context(seed=4))     # a fresh simulator of the same model
@@ -55,6 +58,8 @@ def test_a_restored_simulator_continues_with_the_bits_of_one_run(record, setting
     tail = later.run(record.time[m - 1:n], record.U[m - 1:n], first_row=head.act[-1])
     assert np.array_equal(np.concatenate((head.act[:-1], tail.act)), whole.act, equal_nan=True)
     assert np.array_equal(np.concatenate((head.q[:-1], tail.q)), whole.q)
+    # the factor of M + h dF/dqd was renewed as often: a call that continues another keeps it
+    assert later.context.XG[XG_FACTORS] == whole_ctx.XG[XG_FACTORS]
     # the sensors are noisy (the robot's wiper noise): the same numbers were drawn, none twice
     assert np.ptp(whole.act[:, 0, YA_SENS_V]) > 0
 

@@ -87,11 +87,8 @@ class Runner:
         try:
             ctx = Plant(s).create_context(s, seed=0, owned=True)     # s is this call's own copy
             sim = Simulator(ctx)
-            # pieces continue with the same bits where the rigid body is refreshed once per output step
-            # (every robot's setting; Simulator.save); otherwise the run is one piece
-            pieces = s.integrator["rigid_body_refresh"] <= 0
-            key = _key(sim, rec) if pieces and (keep_end or resume is not None) else b""
-            end = resume.end if pieces and resume is not None and resume.ok else None
+            key = _key(sim, rec) if keep_end or resume is not None else b""
+            end = resume.end if resume is not None and resume.ok else None
             if end is None or end.key != key:
                 end = None
             elif end.index >= n - 1:        # the earlier run had these samples
@@ -101,8 +98,7 @@ class Runner:
             run = _Run(sim, rec)
             if end is not None:
                 run.resume(resume, end)
-            stops = [n] if abandon is None or not pieces else \
-                [run.have + (n - run.have) * k // PIECES for k in range(1, PIECES + 1)]
+            stops = [n] if abandon is None else [run.have + (n - run.have) * k // PIECES for k in range(1, PIECES + 1)]
             for stop in stops:
                 run.to(stop)
                 if stop < n and abandon(run.outputs()):
@@ -113,7 +109,7 @@ class Runner:
         for y in out.angles.values():
             if not np.all(np.isfinite(y)):
                 return Outputs({}, {}, ok=False)
-        if keep_end and pieces:
+        if keep_end:
             out.end = End(key, n - 1, sim.save(), run.row.copy())
         return out
 

@@ -367,9 +367,9 @@ def advance(dts, U, tree, DP, AP, GP, XQ, XS, XG, HT, HU, rng, ws, Yt, Yq, Yqd, 
         refresh_command_chain(AP, h, ws.Acc, ws.Bcc, ws.expw)
         for s in range(nsub):
             refresh = (s == 0) if rb_every <= 0 else (int(XG[XG_STEPS]) % rb_every == 0)
-            # the first substep of a call factors afresh: the parameters (locks) may have changed
-            substep(h, t + s * h, HU[slot], tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh,
-                    refresh or (k == 0 and s == 0))
+            # a factor the simulator marked stale (new parameters: locks) is renewed by the tolerance
+            # test (workspace.STALE), so a call continues another with the bits of one run
+            substep(h, t + s * h, HU[slot], tree, DP, AP, GP, XQ, XS, XG, HT, HU, ws, refresh, refresh)
             XG[XG_STEPS] += 1.0
         XG[XG_TIME] = t + dt
         if not _state_ok(XQ, XS, XG):

@@ -47,13 +47,18 @@ def tree_arrays(tree, lowered) -> TreeArrays:
                       c(lowered.inertia), c(tree.gravity), jtype)
 
 
+# the diagonal a factor was made with, marking it stale: no damping is within the tolerance of it, so
+# the next substep factors afresh (also with a tolerance of 0 or below)
+STALE = 1e300
+
+
 def make_workspace(n: int, na: int) -> Workspace:
     """Scratch space for a tree of ``n`` joints driven by ``na`` actuators."""
     z = np.zeros
     return Workspace(
         Rw=z((n, 3, 3)), ow=z((n, 3)), aw=z((n, 3)), cw=z((n, 3)), Iw=z((n, 3, 3)), tmp33=z((3, 3)),
         w=z((n, 3)), dw=z((n, 3)), ao=z((n, 3)), F=z((n, 3)), N=z((n, 3)), mc=z(n), hc=z((n, 3)), Ic=z((n, 3, 3)),
-        M=z((n, n)), Lf=z((n, n)), Dfac=z(n), Dnew=z(n), bias=z(n), zero=z(n),
+        M=z((n, n)), Lf=z((n, n)), Dfac=np.full(n, STALE), Dnew=z(n), bias=z(n), zero=z(n),
         rhs=z(n), Dlin=z(n), Ffr=z(n), Sfr=z(n), Tact=z(n), Kst=z(n), qd0=z(n),
         spool_s=z(na),
         Acc=z((5, 5)), Bcc=z((5, 2)), expw=z((6, 7, 7)),
