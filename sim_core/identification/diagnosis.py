@@ -153,6 +153,21 @@ def _numerics(model, rec: Record, val: Record | None, vrec: Record) -> tuple[Run
     return fast, Runner(vrec, fast.substep), numerics
 
 
+def _numerics_again(model, fast: Runner, vfast: Runner, vprob: oe.Problem, rec: Record, val: Record | None,
+                    vrec: Record, numerics: dict) -> tuple[Runner, Runner]:
+    """The fast runners, chosen again on ``model`` (the calibrated one) where it diverges at their
+    step over the validation part: the step was checked on the nominal model, and a calibrated one
+    may need a finer one. Says so in ``numerics`` (``calibrated_model``)."""
+    if fast.substep is None or vfast.simulate(model, vprob.n).ok:
+        return fast, vfast
+    coarse = fast.substep
+    fast, vfast, again = _numerics(model, rec, val, vrec)
+    numerics["calibrated_model"] = {**again, "nominal_model_substep": coarse,
+                                    "because": f"the calibrated model diverged at the nominal model's step of {coarse:g} s"}
+    numerics["substep"] = again["substep"]
+    return fast, vfast
+
+
 def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
     """Estimation and validation problems: the first 60 % and the last 40 % of a single record, or the
     whole record and the whole validation record."""
@@ -234,14 +249,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
-    if fast.substep is not None and not vfast.simulate(base_fast, vprob.n).ok:
-        # the step was checked on the nominal model: the calibrated one may need a finer one
-        coarse = fast.substep
-        fast, vfast, again = _numerics(base_fast, rec, val, vrec)
-        numerics["calibrated_model"] = {**again, "nominal_model_substep": coarse,
-                                        "because": f"the calibrated model diverged at the nominal model's "
-                                                   f"step of {coarse:g} s"}
-        numerics["substep"] = again["substep"]
+    fast, vfast = _numerics_again(base_fast, fast, vfast, vprob, rec, val, vrec, numerics)
     for c in cal.changes:
         if not c["identified"]:
             log(f"calibration: {c['parameter']} not identified ({c['not_identified_because']}); kept at {c['nominal']:.6g}")
