@@ -26,7 +26,7 @@ from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
 from .record import start_position
 from .residual_tests import autocorrelation
-from .side_by_side import SideBySide
+from .side_by_side import SideBySide, held
 
 # where each effect typically shows (the legend of the highlighted evidence)
 EVIDENCE = {
@@ -108,23 +108,16 @@ def all_plots(d: Diagnosis, joints: list[str], workers: int = 0) -> dict[str, di
     count, 1: here."""
     jobs = [(j, name) for name in FIGURES for j in joints]
     _pyplot()                      # imported once, before any fork: the children inherit it
-    _FORKED["diagnosis"] = d       # inherited by the forked children, not pickled with every job
-    try:
-        with SideBySide(workers) as side:
-            pngs = side.map(_forked_figure, jobs)
-    finally:
-        _FORKED.clear()
+    with SideBySide(workers) as side:
+        pngs = side.map(_forked_figure, jobs, hold=d)   # the children hold the diagnosis from their fork
     out: dict[str, dict[str, str]] = {j: {} for j in joints}
     for (j, name), png in zip(jobs, pngs):
         out[j][name] = png
     return out
 
 
-_FORKED: dict = {}
-
-
 def _forked_figure(job) -> str:
-    return _figure(_FORKED["diagnosis"], *job)
+    return _figure(held(), *job)
 
 
 def preload() -> None:
