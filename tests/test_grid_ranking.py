@@ -99,3 +99,11 @@ def test_a_ranking_the_budget_cuts_short_runs_whole_and_in_order(record):
     with pytest.raises(oe._Budget):
         oe._rank(runner, prob, specs, [0] * len(specs), sims, max_sims=4)
     assert sims[0] == 4
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 9])
+def test_a_run_shorter_than_its_pieces_is_still_the_whole_run(record, n):
+    runner = Runner(record, 2e-3)
+    spec = _widths([0.6])[0]
+    assert np.array_equal(runner.simulate(spec, n, abandon=lambda out: False).angles["j2"],
+                          runner.simulate(spec, n).angles["j2"])

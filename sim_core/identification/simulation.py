@@ -98,7 +98,8 @@ class Runner:
             run = _Run(sim, rec)
             if end is not None:
                 run.resume(resume, end)
-            stops = [n] if abandon is None else [run.have + (n - run.have) * k // PIECES for k in range(1, PIECES + 1)]
+            stops = [n] if abandon is None else \
+                sorted({run.have + (n - run.have) * k // PIECES for k in range(1, PIECES + 1)} - {run.have})
             for stop in stops:
                 run.to(stop)
                 if stop < n and abandon(run.outputs()):
