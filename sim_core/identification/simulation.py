@@ -87,8 +87,8 @@ class Runner:
         try:
             ctx = Plant(s).create_context(s, seed=0, owned=True)     # s is this call's own copy
             sim = Simulator(ctx)
-            key = _key(sim, rec) if keep_end or resume is not None else b""
             end = resume.end if resume is not None and resume.ok else None
+            key = _key(sim, rec) if keep_end or end is not None else b""
             if end is None or end.key != key:
                 end = None
             elif end.index >= n - 1:        # the earlier run had these samples
