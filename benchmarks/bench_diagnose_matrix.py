@@ -456,6 +456,9 @@ def run_case(case: dict, work: Path) -> dict:
     ceilings = d["decision"].get("channel_ceilings", {}).get(joint, {})
     fits = d["extended"]["channels"].get(joint, {})
     out["channel_gaps"] = {c: round(v - fits[c], 2) for c, v in ceilings.items() if c in fits}
+    beyond = sorted({r["parameter"] for s in d["selected"] for r in s.get("as_well_beyond_range", [])})
+    if beyond:
+        out["as_well_beyond_range"] = beyond     # a rig's estimated parameters beyond their ranges, as good
     if d.get("unexplained"):
         out["unexplained_because"] = d["unexplained"]["because"]
         out["closest"] = sorted((c["effect"], c["joint"]) for c in d["unexplained"].get("closest", []))

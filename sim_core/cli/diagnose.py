@@ -87,6 +87,10 @@ def run(args):
                 for r in s.get("rivals", [])[1:]]
         flag += f"; as close: {', '.join(more)}" if more else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
+        for r in s.get("as_well_beyond_range", []):
+            print(f"    as well explained by {r['parameter']} = {r['value']:.4g}, beyond its declared range "
+                  f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] ({r['score'] - r['score_with_effect']:+.2f} "
+                  f"points): the record does not tell them apart; decided by {r['decided_by']}")
         for name, h in s.get("held_at_default", {}).items():
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
         for line in conditional.describe(s):

@@ -100,6 +100,9 @@ class Evaluation:
     # candidate may still be the one that explains a record the model misses (best_explaining)
     short_of_floor: bool = False
     explains_record: str | None = None        # why it was accepted below the floor (best_explaining), else None
+    # parameters freed beyond their declared ranges that explain the record as well in its place
+    # (stand_in): the record does not tell the effect from them
+    as_well_beyond_range: list[dict] = field(default_factory=list)
 
     @property
     def accepted_ok(self) -> bool:
@@ -533,7 +536,11 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
     freed instead scores within THRESHOLD_POINTS of ``full``, what the effect explained is a
     calibration finding (links heavier than the URDF says, not a payload). A stand-in that stops at a
     bound of its range (what a nominal parameter may plausibly be off by) does not: the record asks
-    for more than a calibration.
+    for more than a calibration; nor does one that ``refit_instead`` says stops short of what it
+    stands in for (a parameter freed beyond its declared range that ends inside it: bound is then why).
+    A stand-in beyond its declared range (``p.declared``: that range) replaces the effect only where it
+    explains the record by the threshold better; as well, the effect stays and keeps it in
+    ``as_well_beyond_range``.
 
     ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
     ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
@@ -551,7 +558,18 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
             alt, s, value, bound = refit_instead(model, ev, rest, p)
             if full - s >= THRESHOLD_POINTS or bound is not None:
                 log(f"stand-in: {ev.candidate.label} stays ({getattr(p, 'key', p)} = {value:.4g}"
-                    + (f" at its {bound} bound" if bound else "") + f", {s - full:+.2f} points)")
+                    + (f" at its {bound} bound" if bound in ("lower", "upper") else f", {bound}" if bound else "")
+                    + f", {s - full:+.2f} points)")
+                continue
+            declared = getattr(p, "declared", None)
+            if declared is not None and s - full < THRESHOLD_POINTS:
+                # a parameter beyond the range its user declared, as good but not better: the user's
+                # range is a statement about the rig as much as the bank's effects are, so the effect
+                # stays and says the record does not tell them apart
+                log(f"stand-in: {ev.candidate.label} stays, as well explained by {p.key} = {value:.4g} beyond its "
+                    f"declared range ({s - full:+.2f} points)")
+                ev.as_well_beyond_range.append({"parameter": p.key, "value": value, "declared_range": list(declared),
+                                                "score": round(s, 3), "score_with_effect": round(full, 3)})
                 continue
             log(f"stand-in: {ev.candidate.label} replaced by a calibration ({full:.2f} -> {s:.2f} points)")
             ev.reasons.append(f"not named: a calibration in its place ({getattr(p, 'key', p)} = {value:.4g}) explains the "

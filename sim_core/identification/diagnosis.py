@@ -30,6 +30,7 @@ from . import output_error as oe
 from . import blind_spots, command_null, conditional, detectability, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
+from .beyond_range import stopped_at_an_end
 from .candidates import bank
 from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
                        residual_explained_pct, rivalry, unexplained_reasons, verdict)
@@ -198,6 +199,11 @@ def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
     return fits
 
 
+def _param_value(spec, key: str) -> float:
+    """The value ``spec`` holds for a parameter key."""
+    return FreeParameter(key, -math.inf, math.inf).get(spec)
+
+
 def _pressure_noise(rec: Record) -> dict[str, float]:
     return {j: 0.5 * (noise_std(pa) + noise_std(pb)) for j, (pa, pb) in rec.pressures.items()}
 
@@ -363,19 +369,48 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         return any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())
 
     # masked pairs are searched only where the model's residual tests fail on the validation data
+    # an estimated parameter the calibration stopped at an end of its declared range stands in for
+    # every named effect, freed beyond that end (beyond_range.py)
+    beyond = stopped_at_an_end(m0, cal.changes, pl.free, nuisance)
+    stand_ins = ({e: pl.stand_ins.get(e, []) + beyond for e in {c.effect for c in cands} | set(pl.stand_ins)}
+                 if beyond else pl.stand_ins)
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
-                 recalibrate=recalibrate, stand_ins=pl.stand_ins, checkpoint=checkpoint, misfit=misfit)
+                 recalibrate=recalibrate, stand_ins=stand_ins, checkpoint=checkpoint, misfit=misfit)
     if sel.stand_ins:
         # a stand-in took an effect's place: it is a calibration finding, so the baseline is calibrated
         # again with it freed (the model the named effects, if any, and the report compare against)
         extra = [replace(fp) for fp in {t[1].key: t[1] for t in sel.stand_ins}.values()]
         why = dict(pl.why)
         for ev, fp, value, s_with, s_effect in sel.stand_ins:
-            why[fp.key] = (f"held for {ev.candidate.effect}, freed in place of {ev.candidate.label}: explains the "
-                           f"record as well ({s_with - s_effect:+.2f} points)")
+            if fp.key in nuisance:
+                why[fp.key] = (f"{pl.why[fp.key]}; freed beyond it to [{fp.lower:.4g}, {fp.upper:.4g}] in place of "
+                               f"{ev.candidate.label}: explains the record better ({s_with - s_effect:+.2f} points)")
+            else:
+                why[fp.key] = (f"held for {ev.candidate.effect}, freed in place of {ev.candidate.label}: explains the "
+                               f"record as well ({s_with - s_effect:+.2f} points)")
             pl.held.pop(fp.key, None)
-        pl.free, pl.why = pl.free + extra, why
-        cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
+        keys_extra = {fp.key for fp in extra}
+        st.ranges.update({fp.key: fp for fp in extra if fp.key in st.ranges})   # refitted within the wider range
+        pl.free, pl.why = [fp for fp in pl.free if fp.key not in keys_extra] + extra, why
+        found_beyond = {fp.key: value for _, fp, value, _, _ in sel.stand_ins if fp.key in nuisance}
+        if found_beyond:
+            # the parameter beyond its declared range is the finding: calibrated again from where the
+            # stand-in's fit ended (from the spec's values it can end in a worse basin), on the model
+            # without effects; where it is not identified by itself beside the rig's other estimated
+            # parameters it stays where it explained the record, not at the spec's value the record rejected
+            start = m0.copy()
+            for fp in pl.free:
+                fp.apply(start, fp.get(sel.model))
+            cal = calibrate_side_by_side(start, fast, est, free=pl.free, why=pl.why,
+                                         nominal={**{fp.key: fp.get(m0) for fp in pl.free}, **found_beyond})
+            for row in cal.changes:
+                if row["parameter"] in found_beyond:
+                    row["nominal"] = float(_param_value(m0, row["parameter"]))
+                    if not row["identified"]:
+                        row["note"] = (f"kept at {row['value']:.4g}, where it explained the record in the named effect's "
+                                       "place (not identified by itself beside the other estimated parameters)")
+        else:
+            cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
         base_fast = cal.spec
         keys[:] = refit_keys(cal.identified)
     timings["selection"] = time.perf_counter() - t_start
@@ -456,6 +491,11 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 "refit_of_nominal": c.existing, "round": ev.round}
         if ev.explains_record:
             item["explains_record"] = ev.explains_record
+        if ev.as_well_beyond_range:
+            item["as_well_beyond_range"] = [
+                {**r, "decided_by": f"measuring {r['parameter']} (then deleting its [estimated] line)"
+                 + ("" if rec.has_pressures else " or recording the chamber pressures")}
+                for r in ev.as_well_beyond_range]
         if ev.held_at_default:
             item["held_at_default"] = {name: {"value": v, "because": HELD_BECAUSE} for name, v in ev.held_at_default.items()}
         if elasticity:

@@ -353,6 +353,11 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                     parts.append(f" As close: {e(r['effect'])}{' on ' + e(r['joint']) if r['joint'] else ''} "
                                  f"({r['gain']:+.2f} points); what would decide: {e(r['decided_by'])}.")
             parts.append("</p>")
+        for r in s.get("as_well_beyond_range", []):
+            parts.append(f"<p><b class='bad'>As well explained</b> by {e(r['parameter'])} = {r['value']:.4g}, beyond "
+                         f"its declared range [{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] "
+                         f"({r['score'] - r['score_with_effect']:+.2f} points): the record does not tell them apart. "
+                         f"What would decide: {e(r['decided_by'])}.</p>")
     parts.append(_calibration_html(data))
     # fits
     parts.append("<h2>Fit on validation data (NRMSE %, angle)</h2><table><tr><th>joint</th><th>baseline</th>"
@@ -586,6 +591,9 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
             o = s["named_together_with"]
             lines.append(f"- named together with {o['effect']}" + (f" on {o['joint']}" if o["joint"] else "")
                          + f": neither passes alone (alone {s.get('alone', {}).get('gain', float('nan')):+.2f} points)")
+        lines += [f"- as well explained by {r['parameter']} = {r['value']:.4g}, beyond its declared range "
+                  f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}]; decided by {r['decided_by']}"
+                  for r in s.get("as_well_beyond_range", [])]
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
             lines += [f"- as close: {r['effect']}" + (f" on {r['joint']}" if r["joint"] else "")

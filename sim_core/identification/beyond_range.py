@@ -1,0 +1,83 @@
+"""An estimated parameter the record pushes past an end of its declared range.
+
+A rig's spec marks what its user does not know (the load, the supply) estimated, with a range. Where
+the baseline calibration stops such a parameter at an end of that range, it goes back to nominal
+(calibration.identifiability: a misfit that is not this parameter's to absorb, for an effect may be
+pushing it there). But the range is the user's guess too: a 10 kg load on a rig declared for 20-85 kg
+moves it as no effect of the bank does, and a candidate that makes up some of it (a 1 % valve
+asymmetry for the load's pull) was named without a word about the load. So such a parameter is a stand-in for
+every named effect (decision.stand_in), freed beyond the end it stopped at by as much as its range
+is wide (inside the parameter's physical bounds), in the effect's place. Where it explains the
+record by the threshold better than the effect (with its value outside the declared range, not
+inside), the effect was standing in for it: a calibration finding, the range the one to correct.
+Where as well (the load's pull and a valve asymmetry set the same up/down speeds on a record
+without pressures), the record does not tell them apart: the effect stays named and says so
+(``as_well_beyond_range``), with the measurement that decides.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from .calibration import at_bound, keep_rank
+from .parameters import FreeParameter, declared
+
+
+def stopped_at_an_end(spec, changes: list[dict], free: list[FreeParameter], nuisance: set[str]) -> list[FreeParameter]:
+    """The estimated parameters (``nuisance`` keys of ``free``) whose calibration (``changes`` rows)
+    stopped at an end of their declared range, each widened beyond that end to the physical bound
+    (``spec``: the model spec they belong to)."""
+    by_key = {fp.key: fp for fp in free}
+    out = []
+    for row in changes:
+        fp = by_key.get(row["parameter"])
+        if fp is None or fp.key not in nuisance or row["identified"]:
+            continue
+        side = at_bound(fp, row["fitted"])
+        if side is not None:
+            wide = widened(fp, side, declared_bounds(spec, fp))
+            if wide is not None:
+                out.append(wide)
+    # tried in the calibration's own order of what a rig's user least knows (calibration.KEEP_ORDER:
+    # without pressures a load carries what it and the supply explain together)
+    return sorted(out, key=lambda fp: keep_rank(fp.key))
+
+
+@dataclass
+class BeyondRange(FreeParameter):
+    """An estimated parameter freed beyond its declared range (``declared``: that range). It explains
+    a record beyond the range only with a value outside it: inside, what explained the record was the
+    refit of the others, not the range."""
+
+    declared: tuple[float, float] = (-math.inf, math.inf)
+
+    def within_declared(self, value: float) -> str | None:
+        """Why ``value`` is no finding beyond the range (it lies inside it), else None."""
+        lo, hi = self.declared
+        return f"inside its declared range [{lo:.4g}, {hi:.4g}]" if lo <= value <= hi else None
+
+
+def widened(fp: FreeParameter, side: str, bound: tuple[float, float]) -> BeyondRange | None:
+    """``fp`` with its ``side`` ('lower' or 'upper') end moved beyond it by as much as the range is
+    wide (by its ratio, on a log scale), inside the physical ``bound``; None where there is no room."""
+    lower, upper = fp.lower, fp.upper
+    if side == "lower":
+        lower = max(fp.lower * fp.lower / fp.upper if fp.log else fp.lower - (fp.upper - fp.lower), bound[0])
+        if not lower < fp.lower:
+            return None
+    else:
+        upper = min(fp.upper * fp.upper / fp.lower if fp.log else fp.upper + (fp.upper - fp.lower), bound[1])
+        if not upper > fp.upper:
+            return None
+    out = BeyondRange(**{f.name: getattr(fp, f.name) for f in fields(FreeParameter)}, declared=(fp.lower, fp.upper))
+    out.lower, out.upper = lower, upper
+    out.log = out.lower > 0 and out.upper / out.lower > 3.0
+    return out
+
+
+def declared_bounds(spec, fp: FreeParameter) -> tuple[float, float]:
+    """The physical bounds of ``fp``'s parameter in ``spec`` (its effect's, for a sensor's gain or
+    offset, which the calibration fits as the error they cause)."""
+    p = declared(spec, fp.key)
+    return (p.lower, p.upper)

@@ -1,0 +1,123 @@
+"""An estimated parameter the record pushes past an end of its declared range stands in for every
+named effect, freed beyond that end: where it explains the record better than the effect, the
+effect was standing in for it (a calibration finding); as well, the effect stays named and says the
+record does not tell them apart (a lighter load than declared and a valve asymmetry set the same
+up/down speeds on a record without pressures)."""
+
+import json
+
+import pytest
+
+from rig_records import closed_loop_record, write_headerless
+from sim_core.identification import decision as dc
+from sim_core.identification.beyond_range import BeyondRange, stopped_at_an_end, widened
+from sim_core.identification.candidates import Candidate
+from sim_core.identification.parameters import FreeParameter
+from sim_core.model.spec import load_robot
+
+TRUE_LOAD = 10.0          # kg, under the boom template's declared [20, 85]
+
+
+def test_an_end_moves_out_by_the_ranges_width_inside_the_physical_bounds():
+    lin = FreeParameter("p", 20.0, 85.0)
+    assert widened(lin, "lower", (-1000.0, 5000.0)).lower == pytest.approx(-45.0)
+    assert widened(lin, "lower", (0.0, 5000.0)).lower == 0.0                      # clipped at the bound
+    assert widened(lin, "upper", (-1000.0, 5000.0)).upper == pytest.approx(150.0)
+    assert widened(lin, "upper", (-1000.0, 85.0)) is None                           # no room left
+    w = widened(lin, "lower", (-1000.0, 5000.0))
+    assert (w.upper, lin.lower) == (85.0, 20.0)       # the other end and the original stay as they were
+    log = FreeParameter("q", 1e6, 1e7, log=True)
+    assert widened(log, "upper", (0.0, 1e9)).upper == pytest.approx(1e8)             # by its ratio
+    assert widened(log, "lower", (0.0, 1e9)).lower == pytest.approx(1e5)
+
+
+def test_only_estimated_parameters_stopped_at_an_end_stand_in_the_load_first():
+    spec = load_robot("hydrolek")
+    free = [FreeParameter("supply.pressure", 9.8e6, 16.1e6), FreeParameter("effects.payload.j2.mass", 20.0, 85.0),
+            FreeParameter("joints.j2.valve.rated_flow", 1e-5, 1e-4, log=True),
+            FreeParameter("effects.sensor_offset.j2.offset", -0.1, 0.1)]
+    rows = [{"parameter": "supply.pressure", "fitted": 16.1e6, "identified": False},
+            {"parameter": "effects.payload.j2.mass", "fitted": 20.0, "identified": False},
+            {"parameter": "joints.j2.valve.rated_flow", "fitted": 1e-4, "identified": False},      # not estimated
+            {"parameter": "effects.sensor_offset.j2.offset", "fitted": 0.05, "identified": False}]  # inside
+    nuisance = {"supply.pressure", "effects.payload.j2.mass", "effects.sensor_offset.j2.offset"}
+    got = stopped_at_an_end(spec, rows, free, nuisance)
+    assert [fp.key for fp in got] == ["effects.payload.j2.mass", "supply.pressure"]
+    assert got[0].lower < 20.0 and got[0].upper == 85.0
+    assert got[1].upper > 16.1e6 and got[1].lower == 9.8e6
+    # identified at an end: not a stand-in (identifiability says so only for values inside)
+    rows[0]["identified"] = True
+    assert [fp.key for fp in stopped_at_an_end(spec, rows, free, nuisance)] == ["effects.payload.j2.mass"]
+
+
+def _named(effect="valve_asymmetry"):
+    c = Candidate(effect, "boom", [FreeParameter(f"effects.{effect}.boom.ratio", 0.2, 5.0, log=True, null=1.0)])
+    return dc.Evaluation(c, {}, {}, {}, 1.0, {}, gain=20.0)
+
+
+def _stand_in(score, value, bound=None, p=None):
+    """A valve asymmetry named in a model scoring 97.0; ``p`` (default: the load freed beyond its
+    declared [20, 85]) refitted in its place scores ``score`` at ``value``."""
+    p = p or BeyondRange("effects.payload.boom.mass", -45.0, 85.0, declared=(20.0, 85.0))
+    ev = _named()
+
+    def refit_instead(model, e, rest, q):
+        return "model with " + q.key, score, value, bound or (q.within_declared(value) if isinstance(q, BeyondRange) else None)
+
+    out = dc.stand_in([ev], "model", 97.0, stand_ins=lambda e: [p], refit_instead=refit_instead)
+    return out, ev
+
+
+def test_beyond_its_range_a_parameter_replaces_an_effect_only_where_it_explains_the_record_better():
+    (model, kept, found), ev = _stand_in(99.5, 12.0)                    # 2.5 points better: the finding
+    assert kept == [] and model == "model with effects.payload.boom.mass" and found[0][2] == 12.0
+    for score in (97.02, 95.5, 98.9):                                    # as well (within 2 points): stays, says so
+        (model, kept, found), ev = _stand_in(score, 12.0)
+        assert kept == [ev] and found == [] and model == "model"
+        assert [r["parameter"] for r in ev.as_well_beyond_range] == ["effects.payload.boom.mass"]
+        assert ev.as_well_beyond_range[0]["declared_range"] == [20.0, 85.0]
+    (model, kept, found), ev = _stand_in(94.9, 12.0)                     # worse by the threshold: stays, silent
+    assert kept == [ev] and ev.as_well_beyond_range == []
+    # ended inside its declared range or on its widened bound: what explained the record was not the range
+    for value, bound in ((25.0, None), (-45.0, "lower")):
+        (model, kept, found), ev = _stand_in(99.5, value, bound)
+        assert kept == [ev] and found == [] and ev.as_well_beyond_range == []
+    # a plain stand-in (a held nominal parameter, no declared range) replaces within the threshold, as before
+    (model, kept, found), ev = _stand_in(96.0, 1.1, p=FreeParameter("links.mass_scale", 0.5, 2.0))
+    assert kept == [] and ev.as_well_beyond_range == []
+
+
+def test_a_load_under_its_declared_range_is_said_to_explain_the_record_as_well(cli, tmp_path):
+    rig = tmp_path / "rig"
+    cli("rig", "new", "boom", "--out", rig, check=True)
+    spec = load_robot(rig)
+    j = spec.joint_names[0]
+    key = f"effects.payload.{j}.mass"
+    i = spec.tree.index(spec.joint(j).dof)
+    span = float(spec.tree.upper[i] - spec.tree.lower[i])
+    off = {f"joints.{j}.valve.rated_flow": 1.1, "supply.pressure": 0.9}
+    rows, _ = closed_loop_record(rig, hidden=("payload", {"mass": TRUE_LOAD}), off=off, seed=1, duration=60.0,
+                                 start_offset=0.05 * span)
+    write_headerless(rows, tmp_path / "log.csv")
+    cli("import", tmp_path / "log.csv", "--robot", rig, "--out", tmp_path / "rec.csv", "--no-header",
+        "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2", check=True)
+    proc = cli("diagnose", "--robot", rig, tmp_path / "rec.csv", "--report", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    row = {r["parameter"]: r for r in d["calibration"]["changes"]}[key]
+    lower = float(row["why"].split("range [")[1].split(",")[0])
+    # the premise: the calibration stops the load at its declared lower end, and an effect that makes up
+    # part of the load's pull is named
+    assert lower == 20.0 and TRUE_LOAD < lower
+    assert "lower end of its range" in row["not_identified_because"]
+    assert d["selected"], d["verdict"]
+    # every named effect says the load beyond its range explains the record as well (the load first), at a
+    # value under the range near the truth (conditional on the supply held at nominal, 10 % over the
+    # truth's: a lighter load and a weaker supply set the same speeds), and what would decide
+    for s in d["selected"]:
+        first = s["as_well_beyond_range"][0]
+        assert first["parameter"] == key and first["declared_range"] == [20.0, 85.0]
+        assert first["value"] < lower and first["value"] == pytest.approx(TRUE_LOAD, rel=0.6)
+        assert abs(first["score"] - first["score_with_effect"]) < d["decision"]["threshold_points"]
+        assert "measuring " + key in first["decided_by"]
+    assert "as well explained by " + key in proc.stdout
