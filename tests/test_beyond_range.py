@@ -62,7 +62,7 @@ def _stand_in(score, value, bound=None, p=None):
     ev = _named()
 
     def refit_instead(model, e, rest, q):
-        return "model with " + q.key, score, value, bound or (q.within_declared(value) if isinstance(q, BeyondRange) else None)
+        return "model with " + q.key, score, value, bound
 
     out = dc.stand_in([ev], "model", 97.0, stand_ins=lambda e: [p], refit_instead=refit_instead)
     return out, ev

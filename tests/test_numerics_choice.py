@@ -2,10 +2,7 @@
 angles but not the chamber pressures (end-stop contact at a coarse step) is not chosen, a step that
 diverges is reported as such, and a calibrated model that diverges at it gets a finer one."""
 
-import math
-
 import numpy as np
-import pytest
 
 from sim_core.dataset import Dataset
 from sim_core.excitation import multilevel_prbs

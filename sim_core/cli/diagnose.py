@@ -41,7 +41,7 @@ def run(args):
     import sys
 
     from ..effects import EFFECTS
-    from ..identification import conditional, detectability, diagnosis, report
+    from ..identification import beyond_range, conditional, detectability, diagnosis, report
     from ..identification.decision import THRESHOLD_POINTS
     from ..identification.record import load_record
     from ..ingest import options_from_args
@@ -87,10 +87,8 @@ def run(args):
                 for r in s.get("rivals", [])[1:]]
         flag += f"; as close: {', '.join(more)}" if more else ""
         print(f"  {s['effect']}" + (f" on {s['joint']}" if s["joint"] else "") + f": {params}  gain {s['gain']:+.2f} points{flag}")
-        for r in s.get("as_well_beyond_range", []):
-            print(f"    as well explained by {r['parameter']} = {r['value']:.4g}, beyond its declared range "
-                  f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] ({r['score'] - r['score_with_effect']:+.2f} "
-                  f"points): the record does not tell them apart; decided by {r['decided_by']}")
+        for line in beyond_range.describe(s):
+            print(f"    {line}")
         for name, h in s.get("held_at_default", {}).items():
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
         for line in conditional.describe(s):

@@ -26,8 +26,8 @@ from .parameters import FreeParameter, declared
 
 def stopped_at_an_end(spec, changes: list[dict], free: list[FreeParameter], nuisance: set[str]) -> list[FreeParameter]:
     """The estimated parameters (``nuisance`` keys of ``free``) whose calibration (``changes`` rows)
-    stopped at an end of their declared range, each widened beyond that end to the physical bound
-    (``spec``: the model spec they belong to)."""
+    stopped at an end of their declared range, each widened beyond that end (:func:`widened`, inside
+    the physical bounds the model ``spec`` declares for it)."""
     by_key = {fp.key: fp for fp in free}
     out = []
     for row in changes:
@@ -36,7 +36,8 @@ def stopped_at_an_end(spec, changes: list[dict], free: list[FreeParameter], nuis
             continue
         side = at_bound(fp, row["fitted"])
         if side is not None:
-            wide = widened(fp, side, declared_bounds(spec, fp))
+            p = declared(spec, fp.key)
+            wide = widened(fp, side, (p.lower, p.upper))
             if wide is not None:
                 out.append(wide)
     # tried in the calibration's own order of what a rig's user least knows (calibration.KEEP_ORDER:
@@ -76,8 +77,10 @@ def widened(fp: FreeParameter, side: str, bound: tuple[float, float]) -> BeyondR
     return out
 
 
-def declared_bounds(spec, fp: FreeParameter) -> tuple[float, float]:
-    """The physical bounds of ``fp``'s parameter in ``spec`` (its effect's, for a sensor's gain or
-    offset, which the calibration fits as the error they cause)."""
-    p = declared(spec, fp.key)
-    return (p.lower, p.upper)
+def describe(item: dict) -> list[str]:
+    """A named effect's ``as_well_beyond_range`` rows (diagnosis.json's ``selected`` item) as the
+    lines the output and the reports print."""
+    return [f"as well explained by {r['parameter']} = {r['value']:.4g}, beyond its declared range "
+            f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] ({r['score'] - r['score_with_effect']:+.2f} "
+            f"points): the record does not tell them apart; decided by {r['decided_by']}"
+            for r in item.get("as_well_beyond_range", [])]

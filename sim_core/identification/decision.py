@@ -536,11 +536,10 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
     freed instead scores within THRESHOLD_POINTS of ``full``, what the effect explained is a
     calibration finding (links heavier than the URDF says, not a payload). A stand-in that stops at a
     bound of its range (what a nominal parameter may plausibly be off by) does not: the record asks
-    for more than a calibration; nor does one that ``refit_instead`` says stops short of what it
-    stands in for (a parameter freed beyond its declared range that ends inside it: bound is then why).
-    A stand-in beyond its declared range (``p.declared``: that range) replaces the effect only where it
-    explains the record by the threshold better; as well, the effect stays and keeps it in
-    ``as_well_beyond_range``.
+    for more than a calibration. A stand-in beyond its declared range (``p.declared``: that range,
+    beyond_range.BeyondRange) counts only with its value outside that range, and replaces the effect
+    only where it explains the record by the threshold better; as well, the effect stays and keeps it
+    in ``as_well_beyond_range``.
 
     ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
     ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
@@ -556,12 +555,14 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
         for p in stand_ins(ev):
             rest = [e for e in accepted if e is not ev]
             alt, s, value, bound = refit_instead(model, ev, rest, p)
+            declared = getattr(p, "declared", None)
+            if bound is None and declared is not None:
+                bound = p.within_declared(value)
             if full - s >= THRESHOLD_POINTS or bound is not None:
                 log(f"stand-in: {ev.candidate.label} stays ({getattr(p, 'key', p)} = {value:.4g}"
                     + (f" at its {bound} bound" if bound in ("lower", "upper") else f", {bound}" if bound else "")
                     + f", {s - full:+.2f} points)")
                 continue
-            declared = getattr(p, "declared", None)
             if declared is not None and s - full < THRESHOLD_POINTS:
                 # a parameter beyond the range its user declared, as good but not better: the user's
                 # range is a statement about the rig as much as the bank's effects are, so the effect

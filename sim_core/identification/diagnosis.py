@@ -199,11 +199,6 @@ def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
     return fits
 
 
-def _param_value(spec, key: str) -> float:
-    """The value ``spec`` holds for a parameter key."""
-    return FreeParameter(key, -math.inf, math.inf).get(spec)
-
-
 def _pressure_noise(rec: Record) -> dict[str, float]:
     return {j: 0.5 * (noise_std(pa) + noise_std(pb)) for j, (pa, pb) in rec.pressures.items()}
 
@@ -368,12 +363,12 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         """Whether a model's residual tests fail on the validation data (``out``: its outputs)."""
         return any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())
 
-    # masked pairs are searched only where the model's residual tests fail on the validation data
     # an estimated parameter the calibration stopped at an end of its declared range stands in for
     # every named effect, freed beyond that end (beyond_range.py)
     beyond = stopped_at_an_end(m0, cal.changes, pl.free, nuisance)
     stand_ins = ({e: pl.stand_ins.get(e, []) + beyond for e in {c.effect for c in cands} | set(pl.stand_ins)}
                  if beyond else pl.stand_ins)
+    # masked pairs are searched only where the model's residual tests fail on the validation data
     sel = select(st, cands, base_fast, workers=workers, progress=progress, log=log, backend=backend,
                  recalibrate=recalibrate, stand_ins=stand_ins, checkpoint=checkpoint, misfit=misfit)
     if sel.stand_ins:
@@ -401,11 +396,12 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             start = m0.copy()
             for fp in pl.free:
                 fp.apply(start, fp.get(sel.model))
+            spec_values = {fp.key: fp.get(m0) for fp in pl.free}
             cal = calibrate_side_by_side(start, fast, est, free=pl.free, why=pl.why,
-                                         nominal={**{fp.key: fp.get(m0) for fp in pl.free}, **found_beyond})
+                                         nominal={**spec_values, **found_beyond})
             for row in cal.changes:
                 if row["parameter"] in found_beyond:
-                    row["nominal"] = float(_param_value(m0, row["parameter"]))
+                    row["nominal"] = float(spec_values[row["parameter"]])
                     if not row["identified"]:
                         row["note"] = (f"kept at {row['value']:.4g}, where it explained the record in the named effect's "
                                        "place (not identified by itself beside the other estimated parameters)")

@@ -20,7 +20,7 @@ import numpy as np
 from .. import background_import
 from ..dataset import column_unit
 from ..effects import EFFECTS
-from . import conditional
+from . import beyond_range, conditional
 from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
@@ -353,11 +353,7 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                     parts.append(f" As close: {e(r['effect'])}{' on ' + e(r['joint']) if r['joint'] else ''} "
                                  f"({r['gain']:+.2f} points); what would decide: {e(r['decided_by'])}.")
             parts.append("</p>")
-        for r in s.get("as_well_beyond_range", []):
-            parts.append(f"<p><b class='bad'>As well explained</b> by {e(r['parameter'])} = {r['value']:.4g}, beyond "
-                         f"its declared range [{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] "
-                         f"({r['score'] - r['score_with_effect']:+.2f} points): the record does not tell them apart. "
-                         f"What would decide: {e(r['decided_by'])}.</p>")
+        parts += [f"<p><b class='bad'>Beyond a declared range</b>: {e(line)}.</p>" for line in beyond_range.describe(s)]
     parts.append(_calibration_html(data))
     # fits
     parts.append("<h2>Fit on validation data (NRMSE %, angle)</h2><table><tr><th>joint</th><th>baseline</th>"
@@ -591,9 +587,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
             o = s["named_together_with"]
             lines.append(f"- named together with {o['effect']}" + (f" on {o['joint']}" if o["joint"] else "")
                          + f": neither passes alone (alone {s.get('alone', {}).get('gain', float('nan')):+.2f} points)")
-        lines += [f"- as well explained by {r['parameter']} = {r['value']:.4g}, beyond its declared range "
-                  f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}]; decided by {r['decided_by']}"
-                  for r in s.get("as_well_beyond_range", [])]
+        lines += [f"- {line}" for line in beyond_range.describe(s)]
         if s.get("ambiguous"):
             lines.append(f"- ambiguous with {s['runner_up']['effect']}; decided by {s['decided_by']}")
             lines += [f"- as close: {r['effect']}" + (f" on {r['joint']}" if r["joint"] else "")

@@ -38,7 +38,6 @@ from functools import partial
 import numpy as np
 
 from . import output_error as oe
-from .beyond_range import BeyondRange
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, mean_score, member_evaluations, misses_record,
@@ -470,11 +469,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     if stand_ins and accepted:
         def refit_instead(model, ev, rest, fp):
             res = base.fitted(_refit_rest(st, base_spec, model, ev, rest, instead=fp))
-            value = float(res.values[fp.key])
-            bound = res.at_bound(fp.key)
-            if bound is None and isinstance(fp, BeyondRange):
-                bound = fp.within_declared(value)
-            return res.spec, base.score(res.spec), value, bound
+            return res.spec, base.score(res.spec), float(res.values[fp.key]), res.at_bound(fp.key)
 
         model, accepted, replaced = stand_in(accepted, model, base.score(model),
                                              stand_ins=lambda ev: stand_ins.get(ev.candidate.effect, []),
