@@ -121,3 +121,28 @@ def test_a_load_under_its_declared_range_is_said_to_explain_the_record_as_well(c
         assert abs(first["score"] - first["score_with_effect"]) < d["decision"]["threshold_points"]
         assert "measuring " + key in first["decided_by"]
     assert "as well explained by " + key in proc.stdout
+
+
+def test_a_fleet_row_and_its_summary_say_it_too():
+    """The fleet's row of a record, its line in the log and its summary page carry the parameter."""
+    from sim_core.fleet.index_html import index_html
+    from sim_core.fleet.rows import record_row
+    from sim_core.fleet.runner import _finish_text
+
+    item = {"effect": "valve_asymmetry", "joint": "boom", "params": {"ratio": 0.99}, "ci95": {"ratio": [0.98, 1.0]},
+            "gain": 23.7, "ambiguous": False,
+            "as_well_beyond_range": [{"parameter": "effects.payload.boom.mass", "value": 14.2, "declared_range": [20.0, 85.0],
+                                      "score": 97.61, "score_with_effect": 97.59, "decided_by": "measuring it"}]}
+    diag = {"verdict": "discrepancy", "selected": [item], "baseline": {"fit": {"boom": 36.8}},
+            "extended": {"fit": {"boom": 99.4}}, "candidates": [], "data": {"targets": ["boom"]}}
+    row = record_row("log", "log.csv", None, "diagnosed", diag, seconds=7.0)
+    assert row["effects"][0]["as_well_beyond_range"] == ["effects.payload.boom.mass"]
+    assert "as well: effects.payload.boom.mass beyond its declared range" in _finish_text(row)
+    page = index_html({"records": [row], "robot": "rig", "generated": "now", "backend": None, "effects": [],
+                       "totals": {"records": 1, "diagnosed": 1, "unchanged": 0, "failed": 0,
+                                  "verdicts": {"discrepancy": 1}}})
+    assert "as well: effects.payload.boom.mass beyond its declared range" in page
+    # and nothing where the diagnosis says nothing of the kind
+    del item["as_well_beyond_range"]
+    plain = record_row("log", "log.csv", None, "diagnosed", diag, seconds=7.0)
+    assert plain["effects"][0]["as_well_beyond_range"] == [] and "as well" not in _finish_text(plain)

@@ -128,7 +128,9 @@ def index_html(data: dict) -> str:
         eff = "<br>".join(
             f"<b>{e(x['label'])}</b>: " + ", ".join(f"{e(k)}={_fmt(v)} [{_fmt(x['ci95'][k][0])}, {_fmt(x['ci95'][k][1])}]"
                                                     + _unit(x.get("units", {}).get(k)) for k, v in x["params"].items())
-            + (" <i>(ambiguous)</i>" if x["ambiguous"] else "") for x in r["effects"]) or "-"
+            + (" <i>(ambiguous)</i>" if x["ambiguous"] else "")
+            + "".join(f" <i>(as well: {e(p)} beyond its declared range)</i>" for p in x.get("as_well_beyond_range", []))
+            for x in r["effects"]) or "-"
         fits = "".join(f"<td>{_fmt(r['fit_before'].get(j), 3)} &rarr; {_fmt(r['fit_after'].get(j), 3)}</td>" for j in joints)
         cls = "discrepancy" if r["verdict"] == "discrepancy" else "ok"
         parts.append(f"<tr><td>{name}</td><td>{_fmt(r['date'])}</td><td>{e(r['status'])}</td>"

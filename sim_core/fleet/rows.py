@@ -32,7 +32,10 @@ def record_row(name: str, source: str, date: str | None, status: str, diag: dict
     row["verdict"] = diag["verdict"]
     row["effects"] = [{"effect": s["effect"], "joint": s["joint"], "label": label(s["effect"], s["joint"]),
                        "params": s["params"], "ci95": s["ci95"], "gain": s["gain"],
-                       "ambiguous": bool(s.get("ambiguous", False))} for s in diag["selected"]]
+                       "ambiguous": bool(s.get("ambiguous", False)),
+                       # a rig's estimated parameters that explain the record as well beyond their declared ranges
+                       "as_well_beyond_range": [r["parameter"] for r in s.get("as_well_beyond_range", [])]}
+                      for s in diag["selected"]]
     row["fit_before"] = {j: diag["baseline"]["fit"][j] for j in targets if j in diag["baseline"]["fit"]}
     row["fit_after"] = {j: diag["extended"]["fit"][j] for j in targets if j in diag["extended"]["fit"]}
     row["candidate_fits"] = {label(c["effect"], c["joint"]): {"params": c["params"], "gain": c["gain"]}

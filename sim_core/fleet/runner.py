@@ -62,7 +62,9 @@ class FleetResult:
 def _finish_text(row: dict) -> str:
     if row["status"] == "failed":
         return f"FAILED: {row['error']}"
-    named = "; ".join(f"{e['label']} " + ", ".join(f"{k}={v:.4g}" for k, v in e["params"].items()) for e in row["effects"])
+    named = "; ".join(f"{e['label']} " + ", ".join(f"{k}={v:.4g}" for k, v in e["params"].items())
+                      + "".join(f" (as well: {p} beyond its declared range)" for p in e.get("as_well_beyond_range", []))
+                      for e in row["effects"])
     return f"{row['verdict']}" + (f": {named}" if named else "") + f" ({row['seconds']:.0f} s)"
 
 
