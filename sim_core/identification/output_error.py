@@ -22,7 +22,7 @@ from .record import Record
 from .simulation import Outputs, Runner
 
 PRESSURE_WEIGHT = 0.5      # each of p_a, p_b: together they weigh as much as the angle
-DIFF_STEP = 1e-3           # least_squares' relative finite-difference step in the fit coordinate
+DIFF_STEP = 1e-5           # least_squares' relative finite-difference step in the fit coordinate
 FAIL_RESIDUAL = 10.0       # normalised residual of a simulation that failed (far worse than any fit)
 
 
