@@ -4,7 +4,8 @@ A hydraulic joint integrates its command, so one wrong gain turns into a growing
 cost therefore stacks, per joint, the angle and its smoothed velocity (and the chamber pressures when
 recorded), each normalised by the measured channel's spread, so each term is about (1 - fit)^2.
 Non-smooth parameters (deadband, delay, backlash, ...) are started from the best point of a grid;
-``scipy.optimize.least_squares`` ('trf', box bounds) refines. Uncertainties come from the Jacobian,
+``scipy.optimize.least_squares`` ('trf', box bounds) refines, its Jacobian by forward differences
+and, between them, by secant updates of the steps it takes. Uncertainties come from a Jacobian of differences,
 ``cov = s^2 (J'J)^-1``, inflated by N/N_eff because output-error residuals are coloured.
 """
 
@@ -23,6 +24,11 @@ from .simulation import Outputs, Runner
 
 PRESSURE_WEIGHT = 0.5      # each of p_a, p_b: together they weigh as much as the angle
 DIFF_STEP = 1e-5           # least_squares' relative finite-difference step in the fit coordinate
+# after a Jacobian of forward differences (one simulation per free parameter), up to this many
+# accepted steps update it by their secants instead (Broyden: no simulation), each only while the
+# Jacobian predicted the step just taken within BROYDEN_TRUST of what it did; 0: differences at every step
+BROYDEN_UPDATES = 2
+BROYDEN_TRUST = 0.3
 FAIL_RESIDUAL = 10.0       # normalised residual of a simulation that failed (far worse than any fit)
 
 
@@ -252,6 +258,24 @@ def lsq_terminates(x0, f0, J0, x1, f1, ftol: float, xtol: float, lower: float = 
     return ftol_met or xtol_met
 
 
+def broyden_update(J: np.ndarray, step: np.ndarray, df: np.ndarray) -> np.ndarray:
+    """Broyden's rank-one secant update of the Jacobian ``J`` after the step ``step`` changed the
+    residual by ``df``: the least change of ``J`` that maps the step onto what it did."""
+    ss = float(step @ step)
+    if ss <= 0.0:
+        return J
+    return J + np.outer(df - J @ step, step / ss)
+
+
+def _predicted_well(accepted: dict, x: np.ndarray, f1: np.ndarray) -> bool:
+    """Whether the last Jacobian predicted the step to ``x`` well: the residual's change within
+    BROYDEN_TRUST of the linear prediction, relative to the change itself."""
+    step = x - accepted["x"]
+    df = f1 - accepted["f"]
+    miss = float(np.linalg.norm(df - accepted["J"] @ step))
+    return miss <= BROYDEN_TRUST * float(np.linalg.norm(df))
+
+
 def forward_steps(x: np.ndarray, rel: float, lower: float = 0.0, upper: float = 1.0) -> np.ndarray:
     """The forward-difference steps scipy's least_squares takes for ``diff_step=rel`` within
     [lower, upper]: ``rel |x|`` (sqrt(eps) where that vanishes), turned inward at a bound, shortened to
@@ -346,11 +370,16 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
     def jacobian(x):
         """least_squares' forward differences ('2-point', relative step DIFF_STEP, one-sided inside
         the bounds), the columns simulated side by side when ``side`` is given; the budget and the
-        best point as resid's. Not computed where least_squares stops after the step to ``x``."""
+        best point as resid's. Not computed where least_squares stops after the step to ``x``; after
+        a step the last Jacobian predicted well, its secant update (up to BROYDEN_UPDATES in a row)."""
         x = np.asarray(x, dtype=float)
         f0 = last["r"] if "r" in last and np.array_equal(last["x"], x) else resid(x)
         if accepted and lsq_terminates(accepted["x"], accepted["f"], accepted["J"], x, f0, tol, tol):
             raise _Converged
+        if accepted and accepted["fresh"] < BROYDEN_UPDATES and _predicted_well(accepted, x, f0):
+            J = broyden_update(accepted["J"], x - accepted["x"], f0 - accepted["f"])
+            accepted.update(x=x.copy(), f=f0, J=J, fresh=accepted["fresh"] + 1)
+            return J
         h = forward_steps(x, DIFF_STEP)
         cols = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
         budget = max_sims - sims[0]
@@ -370,7 +399,7 @@ def fit(runner: Runner, problem: Problem, spec, free: list[FreeParameter], *, gr
             J[:, i] = (r - f0) / (xi[i] - x[i])
         if len(todo) < len(cols):
             raise _Budget
-        accepted.update(x=x.copy(), f=f0, J=J)
+        accepted.update(x=x.copy(), f=f0, J=J, fresh=0)
         return J
 
     starts = [np.array([fp.to_x(v) for fp, v in zip(free, point)]) for point in grid or []]
