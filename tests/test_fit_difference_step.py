@@ -72,9 +72,9 @@ def test_the_jacobian_is_the_derivative_in_the_valley(record):
 def test_the_fit_follows_the_valley_to_the_truth(record, ratio):
     """From the payload's null and round 1's asymmetry, the fit reaches the hidden payload and
     asymmetry within its budget (the diagnosis's 87 simulations of a three-parameter candidate).
-    The record's noise moves the optimum by a few grams; a fit that stops in the valley's crawl
-    ends kilograms short (1.3-3.6 kg with a step of 1e-3)."""
+    The record's noise and the fit's tolerance leave it a few grams off (0.1-4 g achieved); a fit that
+    stops in the valley's crawl ends kilograms short (1.3-3.6 kg with a step of 1e-3)."""
     spec, free, prob, runner = _problem(record, ratio)
     res = oe.fit(runner, prob, spec, free, max_sims=87, tol=1e-3, uncertainty=False)
-    assert res.values["effects.payload.j2.mass"] == pytest.approx(MASS, abs=0.2)
-    assert res.values["effects.valve_asymmetry.j2.ratio"] == pytest.approx(RATIO, abs=0.002)
+    assert res.values["effects.payload.j2.mass"] == pytest.approx(MASS, abs=0.05)
+    assert res.values["effects.valve_asymmetry.j2.ratio"] == pytest.approx(RATIO, abs=0.001)
