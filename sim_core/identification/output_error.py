@@ -491,8 +491,7 @@ def _rank(runner, gp: Problem, specs: list, groups: list[int], sims: list, max_s
         limit = best.get(groups[k], math.inf)
         stop = None
         if abandon and math.isfinite(limit):
-            def stop(partial, limit=limit):
-                return gp.profiled_bound(partial) > limit * (1.0 + 1e-9)
+            stop = _exceeds(gp, limit)
         if specs[k] is None:
             out_g = Outputs({}, {}, ok=False)
         elif stop is None:
@@ -504,6 +503,13 @@ def _rank(runner, gp: Problem, specs: list, groups: list[int], sims: list, max_s
         costs[k], profiles[k] = gp.profiled_cost(out_g)
         best[groups[k]] = min(limit, costs[k])
     return costs, profiles
+
+
+def _exceeds(gp: Problem, limit: float):
+    """A ranking run's abandon test: its early samples' profiled cost already exceeds ``limit``."""
+    def stop(partial) -> bool:
+        return gp.profiled_bound(partial) > limit * (1.0 + 1e-9)
+    return stop
 
 
 def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
