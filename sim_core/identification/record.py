@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import Dataset, DatasetError, column_unit, input_matrix
+from ..ingest.timegrid import SLOW_RATE_HZ, unit_hint
 from . import held_at_extreme
 from .metrics import fit_ceiling, noise_std
 
@@ -136,6 +137,12 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
     if len(ds) < MIN_SAMPLES:
         raise DatasetError(f"{where}{len(ds)} rows; identification needs at least {MIN_SAMPLES}")
     t = ds.time - ds.time[0]
+    period = float(np.median(np.diff(t)))
+    if period * SLOW_RATE_HZ > 1.0:
+        # before the duration: such a record usually lasts hours, and each simulation of it would too
+        raise DatasetError(f"{where}column 'time': a sample every {period:.4g} s ({1.0 / period:.3g} Hz); identification "
+                           f"needs at least {SLOW_RATE_HZ:g} Hz (the command is replayed held between samples, and "
+                           f"what the model's effects do happens within 0.01-0.1 s); {unit_hint(period)}")
     if t[-1] < MIN_DURATION:
         raise DatasetError(f"{where}column 'time': the record lasts {t[-1]:g} s; identification needs at least {MIN_DURATION:g} s")
     notes: list[str] = []

@@ -4,7 +4,9 @@ grid is kept; time going backwards is an error naming the row.
 Repeated timestamps: the later rows of a run of equal timestamps are dropped and the first kept
 (a logger that writes a sample twice, or a clock that did not tick), and the count is reported.
 A gap is an interval longer than ``GAP_FACTOR`` median periods (missing samples); jitter is the
-spread of the other intervals around the median period.
+spread of the other intervals around the median period. A grid coarser than ``SLOW_RATE_HZ`` is noted
+with the time unit that would give a usable one (:func:`unit_hint`): a logger's milliseconds read as
+seconds make a 50 Hz record a 0.05 Hz one that lasts hours.
 """
 
 from __future__ import annotations
@@ -15,6 +17,21 @@ import numpy as np
 
 GAP_FACTOR = 1.5
 JITTER_NOTE_PCT = 0.1     # below this rms jitter (% of the period) the grid is called regular
+# Hz: the coarsest grid fit and diagnose accept. The valve's command is replayed held from one sample
+# to the next, and what the model's effects do (spool lag, delay, friction, compliance) happens within
+# 0.01-0.1 s: samples farther apart than 0.2 s cannot show it
+SLOW_RATE_HZ = 5.0
+
+
+def unit_hint(median_period_s: float) -> str:
+    """What a median period too long for a record of a moving joint most likely is, and the
+    ``--column`` unit that reads it so: milliseconds or microseconds counted as seconds."""
+    for unit, factor, name in ((":ms", 1e-3, "milliseconds"), (":*1e-6", 1e-6, "microseconds")):
+        period = median_period_s * factor
+        if period <= 1.0 / SLOW_RATE_HZ:
+            return (f"if the time column counts {name}, read it with --column time=SOURCE{unit} (a sample every "
+                    f"{1e3 * period:.4g} ms, {1.0 / period:.4g} Hz)")
+    return "check the time column's unit"
 
 
 @dataclass
@@ -42,7 +59,12 @@ class TimeGrid:
         out = []
         if self.source == "rate":
             out.append(f"time: no time column; a regular grid at {self.rate_hz:g} Hz (--rate)")
+            if self.rate_hz < SLOW_RATE_HZ:
+                out.append(f"time: {self.rate_hz:g} Hz is below the {SLOW_RATE_HZ:g} Hz fit and diagnose need: check --rate")
             return out
+        if self.rate_hz < SLOW_RATE_HZ:
+            out.append(f"time: a sample every {self.median_period_s:.4g} s ({self.rate_hz:.3g} Hz) is below the "
+                       f"{SLOW_RATE_HZ:g} Hz fit and diagnose need; {unit_hint(self.median_period_s)}")
         if self.jitter_rms_pct >= JITTER_NOTE_PCT:
             out.append(f"time: jitter {self.jitter_rms_pct:.2g} % rms (largest {self.jitter_max_pct:.2g} %) of the "
                        f"{1e3 * self.median_period_s:.4g} ms median period; the real timestamps are kept")
