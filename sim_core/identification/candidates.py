@@ -20,6 +20,7 @@ import numpy as np
 from ..effects import EFFECTS
 from ..effects.base import clip_grid
 from ..model.queries import subtree_mass
+from ..model.spec import joint_unit
 from .parameters import FreeParameter, effect_key, find_effect
 
 def confusions() -> dict[frozenset, str]:
@@ -183,7 +184,10 @@ def from_hints(spec, eff, j: str | None, scales: dict, guess: dict) -> Candidate
     hints = eff.candidate(spec, j, scales, guess, dict(inst.params) if inst is not None else None)
     if hints is None:
         return None
-    free = [_fp(eff.name, j, pname, lo, hi, log, null, unit) for pname, lo, hi, log, null, unit in hints["free"]]
+    # the hints state a revolute joint's units: a prismatic joint's friction is a force, its play in m
+    prismatic = j is not None and spec.tree.is_prismatic(spec.joint(j).dof)
+    free = [_fp(eff.name, j, pname, lo, hi, log, null, joint_unit(unit, prismatic) if unit else unit)
+            for pname, lo, hi, log, null, unit in hints["free"]]
     return Candidate(eff.name, j, free, fixed=dict(hints.get("fixed", {})), grid=[list(g) for g in hints.get("grid", [])],
                      existing=inst is not None)
 
