@@ -27,7 +27,7 @@ import numpy as np
 
 from ..dataset import column_unit
 from . import output_error as oe
-from . import blind_spots, command_null, conditional, detectability, held_at_extreme, polarity
+from . import blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .beyond_range import stopped_at_an_end
@@ -564,6 +564,11 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if nulls:
             unexplained["command_null"] = nulls
             unexplained["record_causes"] = command_null.causes(nulls) + unexplained["record_causes"]
+        # a command logged in another scale than the valve saw (a fraction, before an amplifier's gain)
+        scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
+        if scale:
+            unexplained["command_scale"] = scale
+            unexplained["record_causes"] = command_scale.causes(scale, spec) + unexplained["record_causes"]
     if unexplained and check.held_at_extreme:
         unexplained["record_causes"] = [held_at_extreme.cause(j, f, column_unit(f"q_{j}", spec))
                                         for j, f in check.held_at_extreme.items()] + unexplained["record_causes"]
