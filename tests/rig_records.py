@@ -8,6 +8,7 @@ a start pose off the template's. Only the CSV reaches `hydrohil import` and `dia
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -143,3 +144,26 @@ def measured(rig_dir, keys: dict[str, float]) -> None:
     spec = load_robot(rig_dir)
     for key, value in keys.items():
         assert estimable(spec, key)[1] == float(value) and key not in spec.estimated, key
+
+
+def diagnose_log(cli, root, name: str, joint: str, command_unit: str = "") -> tuple[dict, str]:
+    """``diagnose`` of ``root/log.csv`` (headerless: time, sensor volts, command) on the rig in ``root/rig``
+    as a user reads it, the command in ``command_unit`` (e.g. ':*2-10'); the report in ``root/name``.
+    Returns diagnosis.json and what was printed."""
+    proc = cli("diagnose", "--robot", root / "rig", root / "log.csv", "--no-header", "--column", "time=0",
+               "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2{command_unit}", "--report",
+               root / name, "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    assert "RuntimeWarning" not in proc.stderr
+    return json.loads((root / name / "diagnosis.json").read_text()), proc.stdout
+
+
+def rig_log(cli, root, template: str, logged, *, off: dict[str, float], start_offset: float, seed: int = 5):
+    """A clean rig of ``template`` in ``root/rig`` under its P controller, written to ``root/log.csv`` as
+    a headerless log whose command column is ``logged(u)``: the command as a logger got it wrong."""
+    cli("rig", "new", template, "--out", root / "rig", check=True)
+    rows, _ = closed_loop_record(root / "rig", hidden=None, seed=seed, start_offset=start_offset, off=off)
+    rows = np.asarray(rows, float)
+    rows[:, 2] = logged(rows[:, 2])
+    write_headerless(rows, root / "log.csv")
+    return root

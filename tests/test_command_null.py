@@ -5,13 +5,11 @@ fixes it -> the advice followed gives a clean diagnosis.
 
 Expected values come from the signals and logs written here (the null put in), not from the check."""
 
-import json
-
 import numpy as np
 import pytest
 
 from conftest import run_cli
-from rig_records import closed_loop_record, write_headerless
+from rig_records import diagnose_log, rig_log
 from sim_core.effects.valve_offset import SPAN
 from sim_core.identification.command_null import MIN_STILL, bound, causes, off_null, read_as, rest_command
 
@@ -107,27 +105,12 @@ def test_the_cause_names_the_joint_the_null_and_the_fix():
 def unipolar_log(tmp_path_factory):
     """The clean cylinder rig (valve +20 %, supply -15 %, start off) under its P controller, its command
     logged as a 0..10 V output nulled at 5 V: v = 5 + u / 2."""
-    root = tmp_path_factory.mktemp("unipolar")
-    run_cli("rig", "new", "cylinder", "--out", root / "rig", check=True)
-    rows, _ = closed_loop_record(root / "rig", hidden=None, seed=5, start_offset=0.025,
-                                 off={"joints.lift.valve.rated_flow": 1.2, "supply.pressure": 0.85})
-    rows = np.asarray(rows, float)
-    rows[:, 2] = 5.0 + rows[:, 2] / 2.0
-    write_headerless(rows, root / "log.csv")
-    return root
-
-
-def _diagnose(cli, root, name, command_unit=""):
-    proc = cli("diagnose", "--robot", root / "rig", root / "log.csv", "--no-header", "--column", "time=0",
-               "--column", "q_lift=1:sensor_volts", "--column", f"u_lift=2{command_unit}", "--report", root / name,
-               "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    assert "RuntimeWarning" not in proc.stderr
-    return json.loads((root / name / "diagnosis.json").read_text()), proc.stdout
+    return rig_log(run_cli, tmp_path_factory.mktemp("unipolar"), "cylinder", lambda u: 5.0 + u / 2.0, start_offset=0.025,
+                   off={"joints.lift.valve.rated_flow": 1.2, "supply.pressure": 0.85})
 
 
 def test_a_unipolar_command_is_named_and_reading_it_mapped_fixes_it(cli, unipolar_log):
-    d, printed = _diagnose(cli, unipolar_log, "as_logged")
+    d, printed = diagnose_log(cli, unipolar_log, "as_logged", "lift")
     assert d["verdict"] == "unexplained_discrepancy"
     e = d["unexplained"]["command_null"]["joints"]["lift"]
     assert e["median"] == pytest.approx(5.0, abs=0.3)          # the holding command: the null plus tenths
@@ -136,5 +119,5 @@ def test_a_unipolar_command_is_named_and_reading_it_mapped_fixes_it(cli, unipola
     cause = d["unexplained"]["record_causes"][0]
     assert "the command's zero is not the valve's null" in cause and "u_lift=SOURCE:*2-10" in cause
     assert "command's zero is not the valve's null" in printed
-    fixed, _ = _diagnose(cli, unipolar_log, "mapped", ":*2-10")
+    fixed, _ = diagnose_log(cli, unipolar_log, "mapped", "lift", ":*2-10")
     assert fixed["verdict"] == "no_significant_discrepancy", fixed.get("unexplained")

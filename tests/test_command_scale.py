@@ -5,13 +5,11 @@ the advice followed gives a clean diagnosis.
 
 Expected values come from the figures and the log written here (the scale put in), not from the check."""
 
-import json
-
 import numpy as np
 import pytest
 
 from conftest import run_cli
-from rig_records import closed_loop_record, write_headerless
+from rig_records import diagnose_log, rig_log
 from sim_core.identification.command_scale import FULL_SCALE_SHARE, SCALE_LIMIT, causes, factor, ratio, too_fast
 from sim_core.identification.polarity import CORRELATION_MIN
 
@@ -75,26 +73,12 @@ class _Spec:
 def fraction_log(tmp_path_factory):
     """The boom rig (valve +20 %, supply -15 %, start off) under its P controller, its +-10 V command
     logged as a fraction of the amplifier's range: v = u / 10."""
-    root = tmp_path_factory.mktemp("fraction")
-    run_cli("rig", "new", "boom", "--out", root / "rig", check=True)
-    rows, _ = closed_loop_record(root / "rig", hidden=None, seed=5, start_offset=0.05,
-                                 off={"joints.boom.valve.rated_flow": 1.2, "supply.pressure": 0.85})
-    rows = np.asarray(rows, float)
-    rows[:, 2] = rows[:, 2] / 10.0
-    write_headerless(rows, root / "log.csv")
-    return root
-
-
-def _diagnose(cli, root, name, command_unit=""):
-    proc = cli("diagnose", "--robot", root / "rig", root / "log.csv", "--no-header", "--column", "time=0",
-               "--column", "q_boom=1:sensor_volts", "--column", f"u_boom=2{command_unit}", "--report", root / name,
-               "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    return json.loads((root / name / "diagnosis.json").read_text()), proc.stdout
+    return rig_log(run_cli, tmp_path_factory.mktemp("fraction"), "boom", lambda u: u / 10.0, start_offset=0.05,
+                   off={"joints.boom.valve.rated_flow": 1.2, "supply.pressure": 0.85})
 
 
 def test_a_command_logged_as_a_fraction_is_named_and_reading_it_scaled_fixes_it(cli, fraction_log):
-    d, printed = _diagnose(cli, fraction_log, "as_logged")
+    d, printed = diagnose_log(cli, fraction_log, "as_logged", "boom")
     assert d["verdict"] == "unexplained_discrepancy"
     e = d["unexplained"]["command_scale"]["joints"]["boom"]
     assert 10.0 / 3 < e["ratio"] < 10.0 * 3          # the 10 put in, the model's flow gain off by tens of %
@@ -102,6 +86,6 @@ def test_a_command_logged_as_a_fraction_is_named_and_reading_it_scaled_fixes_it(
     assert e["fit_command_scaled"] > e["fit"] + 20
     cause = next(c for c in d["unexplained"]["record_causes"] if "times faster per volt" in c)
     assert "u_boom=SOURCE:*10`" in cause and "times faster per volt" in printed
-    fixed, _ = _diagnose(cli, fraction_log, "scaled", f":*{e['factor']:g}")
+    fixed, _ = diagnose_log(cli, fraction_log, "scaled", "boom", f":*{e['factor']:g}")
     assert fixed["verdict"] == "no_significant_discrepancy", fixed.get("unexplained")
     assert "command_scale" not in (fixed.get("unexplained") or {})

@@ -25,8 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .closed_loop import direction
-from .polarity import CORRELATION_MIN, fit_text, points, replay_fit
+from .polarity import CORRELATION_MIN, evidence, fit_text, points, replay_fit
 from .record import Record
 
 # how many times faster per volt the record must move than the calibrated model: a flow gain off its
@@ -66,16 +65,12 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
     (points, samples ``start``..``n``) as recorded and with the command scaled (:func:`factor`), replayed
     on the baseline model ``spec``. {} when no joint is flagged."""
     found = {}
-    for j in joints:
-        if not base_out.ok or j not in base_out.angles:
-            continue
-        rng = spec.joint(j).command_range
-        u = rec.u(j)[:n]
-        r = direction(u, rec.angles[j][:n], rec.dt, rng)
-        m = direction(u, base_out.angles[j][:n], rec.dt, rng)
+    for j, e in evidence(rec, base_out, spec, joints, n).items():
+        r, m = e["record"], e["model"]
         k = ratio(r, m)
         if not too_fast(k):
             continue
+        rng = spec.joint(j).command_range
         f = factor(k, rec.u(j), rng)
         U = rec.U.copy()
         U[:, rec.joint_names.index(j)] *= f
