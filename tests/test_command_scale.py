@@ -12,6 +12,7 @@ from conftest import run_cli
 from rig_records import diagnose_log, rig_log
 from sim_core.identification.command_scale import FULL_SCALE_SHARE, SCALE_LIMIT, causes, factor, ratio, too_fast
 from sim_core.identification.polarity import CORRELATION_MIN
+from sim_core.model.spec import load_robot
 
 RANGE = (-10.0, 10.0)
 
@@ -47,23 +48,10 @@ def test_the_factor_maps_the_largest_command_onto_the_range_end_where_the_ratio_
 def test_the_cause_names_the_joint_the_ratio_and_the_fix():
     e = {"record_speed_per_volt": 0.397, "model_speed_per_volt": 0.0384, "ratio": 10.34, "factor": 10.0,
          "fit": -58.4, "fit_command_scaled": 99.0}
-    (said,) = causes({"joints": {"boom": e}}, _Spec())
+    (said,) = causes({"joints": {"j2": e}}, load_robot("hydrolek"))
     assert "10.3 times faster" in said and "+0.397 rad/s per V" in said
     assert "-58.4 % as recorded, 99.0 % with the command scaled by 10 (its largest value" in said
-    assert "`--column u_boom=SOURCE:*10`" in said
-
-
-class _Spec:
-    """What causes() asks of a spec: whether the joint is prismatic."""
-
-    class tree:
-        @staticmethod
-        def is_prismatic(dof):
-            return False
-
-    @staticmethod
-    def joint(j):
-        return type("J", (), {"dof": 0})()
+    assert "`--column u_j2=SOURCE:*10`" in said
 
 
 # ---- the user's way --------------------------------------------------------------------------------

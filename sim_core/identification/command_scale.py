@@ -25,6 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..dataset import column_unit
 from .polarity import CORRELATION_MIN, evidence, fit_text, points, replay_fit
 from .record import Record
 
@@ -90,7 +91,7 @@ def causes(result: dict, spec) -> list[str]:
     """What to check in the record or the spec, one sentence per flagged joint."""
     lines = []
     for j, e in (result or {}).get("joints", {}).items():
-        unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
+        unit = column_unit(f"q_{j}", spec)
         k, f = e["ratio"], e["factor"]
         lines.append(
             f"on {j} the recorded joint moves {k:.3g} times faster per volt of command than the calibrated model "
