@@ -158,11 +158,13 @@ def diagnose_log(cli, root, name: str, joint: str, command_unit: str = "") -> tu
     return json.loads((root / name / "diagnosis.json").read_text()), proc.stdout
 
 
-def rig_log(cli, root, template: str, logged, *, off: dict[str, float], start_offset: float, seed: int = 5):
-    """A clean rig of ``template`` in ``root/rig`` under its P controller, written to ``root/log.csv`` as
-    a headerless log whose command column is ``logged(u)``: the command as a logger got it wrong."""
+def rig_log(cli, root, template: str, logged, *, off: dict[str, float], start_offset: float, seed: int = 5,
+            **loop):
+    """A clean rig of ``template`` in ``root/rig`` under its P controller (``loop``: more of
+    ``closed_loop_record``'s settings, e.g. ``ti`` for PI), written to ``root/log.csv`` as a headerless
+    log whose command column is ``logged(u)``: the command as a logger got it wrong."""
     cli("rig", "new", template, "--out", root / "rig", check=True)
-    rows, _ = closed_loop_record(root / "rig", hidden=None, seed=seed, start_offset=start_offset, off=off)
+    rows, _ = closed_loop_record(root / "rig", hidden=None, seed=seed, start_offset=start_offset, off=off, **loop)
     rows = np.asarray(rows, float)
     rows[:, 2] = logged(rows[:, 2])
     write_headerless(rows, root / "log.csv")

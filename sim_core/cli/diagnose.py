@@ -104,6 +104,8 @@ def run(args):
         if n is not None and v is not None and v != n:
             print(f"  calibrated with {'them' if len(d.selected) > 1 else 'it'}: {k} = {v:.6g} (nominal {n:.6g}) "
                   f"{conditional.given(r)}".rstrip())
+    for line in beyond_range.found(d.calibration):
+        print(f"  calibrated beyond a declared range: {line}")
     for why in (d.unexplained or {}).get("because", []):
         print(f"  unexplained: {why}")
     for cause in (d.unexplained or {}).get("record_causes", []):

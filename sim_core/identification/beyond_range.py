@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass, fields
 
 from .calibration import at_bound, keep_rank
+from .command_scale import flow_gain_cause
 from .parameters import FreeParameter, declared
 
 
@@ -84,3 +85,28 @@ def describe(item: dict) -> list[str]:
             f"[{r['declared_range'][0]:.4g}, {r['declared_range'][1]:.4g}] ({r['score'] - r['score_with_effect']:+.2f} "
             f"points): the record does not tell them apart; decided by {r['decided_by']}"
             for r in item.get("as_well_beyond_range", [])]
+
+
+def found(calibration: dict) -> list[str]:
+    """The calibration's findings beyond a declared range (diagnosis.json's ``calibration.stand_ins``
+    rows with a ``declared_range``): one line per parameter (a parameter that stood in for several
+    effects names each), for the output and the reports, with what a flow gain far off the spec's says
+    of the command's scale (command_scale.flow_gain_cause)."""
+    rows: dict[str, list[dict]] = {}
+    for r in calibration.get("stand_ins", []):
+        if "declared_range" in r:
+            rows.setdefault(r["parameter"], []).append(r)
+    lines = []
+    for key, group in rows.items():
+        r = max(group, key=lambda g: g["score"] - g["score_with_effect"])
+        lo, hi = r["declared_range"]
+        places = ", ".join(dict.fromkeys(g["in_place_of"]["effect"] + (f" on {g['in_place_of']['joint']}"
+                                                                        if g["in_place_of"].get("joint") else "")
+                                         for g in group))
+        unit = f" {r['unit']}" if r.get("unit") else ""
+        line = (f"{key} = {r['value']:.4g}{unit} (spec {r['nominal']:.4g}), beyond its declared range "
+                f"[{lo:.4g}, {hi:.4g}]: calibrated there in place of {places}, it explains the record better "
+                f"(up to {r['score'] - r['score_with_effect']:+.2f} points). Correct the spec or its [estimated] range")
+        cause = flow_gain_cause(r)
+        lines.append(line + (f"; {cause}" if cause else ""))
+    return lines

@@ -1,27 +1,35 @@
-"""Does the record move as fast per volt as the model can? The logged command's scale against the valve's.
+"""Does the record move as fast per volt as the spec's valve can? The logged command's scale against the valve's.
 
 A valve meters flow, so a joint's speed follows its command, and the calibration fits the valve's
 flow gain within its range. A command logged in another scale than the valve saw (a 0..1 fraction of
 the amplifier's +-10 V, a controller output in volts before an amplifier's gain, millivolts read as
-volts) leaves the record's joint moving many times faster per logged volt than any calibrated flow
-gain lets the model move, and no effect of the bank makes a joint faster than its valve (friction,
-leaks, deadbands, flow limits and loads all take speed away). So the record stays unexplained; this
-check says why and replays the fix.
+volts) leaves the record's joint moving many times faster per logged volt than the spec's valve lets
+the model move, and no effect of the bank makes a joint faster than its valve (friction, leaks,
+deadbands, flow limits and loads all take speed away). The calibration takes up what its flow gain's
+range allows (to its end, with the other parameters pushed to theirs) and the record stays
+unexplained; this check says why and replays the fix.
 
 Evidence per joint: which way and how fast it moves per volt of command (``closed_loop.direction``),
-for the record and for the baseline model driven by the same command. Flagged where both move the
-same way (each correlation at least ``polarity.CORRELATION_MIN``) and the record moves more than
-``SCALE_LIMIT`` times faster per volt than the model. A record moving slower is not flagged: a stalled
-or loaded joint does that too. The fix is replayed on the baseline model and reported with the fit it
+for the record and for the calibrated baseline model driven by the same command. Where both move the
+same way (each correlation at least ``polarity.CORRELATION_MIN``), the ratio of the two times the
+calibrated flow gain's share of the spec's is how many times faster per volt the record moves than
+the spec's valve; flagged beyond ``SCALE_LIMIT``. A record moving slower is not flagged: a stalled or
+loaded joint does that too. The fix is replayed on the baseline model and reported with the fit it
 gives: the command scaled by that ratio, or, where that would take it beyond the joint's command range
 or the ratio is within ``FULL_SCALE_SHARE`` of it, by the factor that maps the logged command's
 largest value onto the range's end (a closed loop drives its valve to the end of the range, and the
-ratio also carries what the model's flow gain is off by).
+ratio also carries what the spec's flow gain is off by), with the flow gain inside its declared
+range (:func:`replayed`).
+
+The same error can instead be absorbed where the record is explained: a rig that declares its valve's
+flow gain estimated lets it go beyond its declared range in place of a named effect (beyond_range.py),
+by a valve many times larger than the spec's. Such a flow gain, more than ``SCALE_LIMIT`` times the
+spec's (or under its inverse), is checked the same way (:func:`flow_gain`).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,6 +41,65 @@ from .record import Record
 # datasheet, a valve asymmetry or a null offset moves a calibrated model's speed by tens of percent
 SCALE_LIMIT = 3.0
 FULL_SCALE_SHARE = 0.3    # a ratio this close to the logged command's full-scale factor is read as it
+FLOW_GAIN = ".valve.rated_flow"
+
+
+@dataclass(frozen=True)
+class FlowGain:
+    """A joint's valve flow gain (m^3/s): the spec's (``nominal``), the calibrated model's (``value``)
+    and the range the calibration may use (``declared``: the spec's [estimated] range, or the
+    calibration's own)."""
+
+    key: str
+    nominal: float
+    value: float
+    declared: tuple[float, float]
+
+    @property
+    def share(self) -> float:
+        """The calibrated flow gain as a share of the spec's."""
+        return self.value / self.nominal if self.nominal > 0.0 else 1.0
+
+
+def flow_gains(spec, model, free) -> dict[str, FlowGain]:
+    """Per joint, the flow gain of the spec ``spec`` and of the calibrated ``model``, for the valve flow
+    gains among the freed parameters ``free`` (calibration's FreeParameter list; a parameter freed beyond
+    its declared range keeps that range as ``declared``)."""
+    out = {}
+    for fp in free:
+        if fp.key.endswith(FLOW_GAIN) and fp.key.count(".") == 3:
+            out[fp.key.split(".")[1]] = FlowGain(fp.key, float(fp.get(spec)), float(fp.get(model)),
+                                                 tuple(getattr(fp, "declared", (fp.lower, fp.upper))))
+    return out
+
+
+def replayed(model, rec: Record, runner, n: int, start: int, j: str, k: float, flow: FlowGain | None) -> dict:
+    """The fix of a record moving ``k`` times faster per volt on joint ``j`` than the spec's valve:
+    the scale to read the command with (:func:`factor`) and the validation angle fit (points, samples
+    ``start``..``n``) of ``model`` with the command so scaled and its flow gain (``flow``) at the one of
+    two values inside its declared range that replays the record better: the calibrated one (fitted
+    beside the model's other parameters) or the rest of ``k`` (what the speeds per volt ask)."""
+    f = factor(k, rec.u(j), model.joint(j).command_range)
+    U = rec.U.copy()
+    U[:, rec.joint_names.index(j)] *= f
+    scaled = replace(rec, U=U)
+    gains = [None]
+    if flow is not None and flow.nominal > 0.0:
+        lo, hi = flow.declared
+        gains = list(dict.fromkeys(min(max(g, lo), hi) for g in (flow.value, flow.nominal * k / f)))
+    best = None
+    for gain in gains:
+        spec = model.copy()
+        if gain is not None:
+            spec.set(flow.key, gain)
+        fit = replay_fit(rec, j, runner.simulate(spec, n, rec=scaled), start, n)
+        if best is None or fit > best[1]:
+            best = (gain, fit)
+    out = {"factor": float(f"{f:.4g}")}
+    if best[0] is not None:
+        out.update(flow_gain=float(f"{best[0]:.4g}"), flow_gain_share=round(best[0] / flow.nominal, 4))
+    out["fit_command_scaled"] = points(best[1])
+    return out
 
 
 def factor(k: float, u, command_range) -> float:
@@ -61,30 +128,75 @@ def too_fast(k: float | None) -> bool:
     return k is not None and k > SCALE_LIMIT
 
 
-def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[str]) -> dict:
-    """The scale check on the first ``n`` samples; for each flagged joint, the validation angle fit
-    (points, samples ``start``..``n``) as recorded and with the command scaled (:func:`factor`), replayed
-    on the baseline model ``spec``. {} when no joint is flagged."""
+def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[str],
+          flows: dict[str, FlowGain] | None = None) -> dict:
+    """The scale check on the first ``n`` samples of the calibrated baseline model ``spec`` (``flows``:
+    its joints' flow gains, :func:`flow_gains`; a joint without one counts the model's as the spec's);
+    for each flagged joint, the validation angle fit (points, samples ``start``..``n``) as recorded and
+    with the fix replayed (:func:`replayed`). {} when no joint is flagged."""
+    flows = flows or {}
     found = {}
     for j, e in evidence(rec, base_out, spec, joints, n).items():
         r, m = e["record"], e["model"]
-        k = ratio(r, m)
+        k_model = ratio(r, m)
+        if k_model is None:
+            continue
+        share = flows[j].share if j in flows else 1.0
+        k = k_model * share
         if not too_fast(k):
             continue
-        rng = spec.joint(j).command_range
-        f = factor(k, rec.u(j), rng)
-        U = rec.U.copy()
-        U[:, rec.joint_names.index(j)] *= f
-        scaled = runner.simulate(spec, n, rec=replace(rec, U=U))
         found[j] = {"record_speed_per_volt": float(f"{r['speed_per_volt']:.6g}"),
-                    "model_speed_per_volt": float(f"{m['speed_per_volt']:.6g}"), "ratio": round(k, 4),
-                    "factor": float(f"{f:.4g}"), "fit": points(replay_fit(rec, j, base_out, start, n)),
-                    "fit_command_scaled": points(replay_fit(rec, j, scaled, start, n))}
+                    "model_speed_per_volt": float(f"{m['speed_per_volt']:.6g}"), "model_flow_gain_share": round(share, 4),
+                    "ratio": round(k, 4), "fit": points(replay_fit(rec, j, base_out, start, n)),
+                    **replayed(spec, rec, runner, n, start, j, k, flows.get(j))}
     if not found:
         return {}
     return {"joints": found, "rule": (f"the record moves more than {SCALE_LIMIT:g} times faster per volt of command than "
-                                      f"the calibrated model (both with their command, each correlation at least "
-                                      f"{CORRELATION_MIN:g})")}
+                                      f"the spec's valve lets the model move (the record's speed per volt over the "
+                                      f"calibrated model's, times its flow gain's share of the spec's; both with their "
+                                      f"command, each correlation at least {CORRELATION_MIN:g})")}
+
+
+def off_scale(k: float) -> bool:
+    """Whether a calibrated flow gain ``k`` times the spec's is more than a datasheet's tolerance can be."""
+    return k > SCALE_LIMIT or 0.0 < k < 1.0 / SCALE_LIMIT
+
+
+def flow_gain(model, rec: Record, runner, n: int, start: int, base_out, flow: FlowGain) -> dict | None:
+    """The check of a valve flow gain that the calibrated model ``model`` (``base_out``: its outputs)
+    holds at more than SCALE_LIMIT times the spec's (or under its inverse), ``flow``: the fix replayed
+    (:func:`replayed`) beside the validation angle fit (points, samples ``start``..``n``) as calibrated.
+    None for a flow gain within that."""
+    j = flow.key.split(".")[1]
+    k = flow.share
+    if j not in rec.joint_names or not off_scale(k):
+        return None
+    return {"joint": j, "ratio": round(k, 4), "fit": points(replay_fit(rec, j, base_out, start, n)),
+            **replayed(model, rec, runner, n, start, j, k, flow)}
+
+
+def _fix_text(e: dict, j: str) -> str:
+    """The replayed fix (:func:`replayed`'s keys) and how to read the command so."""
+    f = e["factor"]
+    return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g}"
+            + ("" if f == e["ratio"] else " (its largest value onto the end of the command range)")
+            + (f" and the flow gain at {e['flow_gain_share']:.3g} times the spec's (inside its declared range)"
+               if "flow_gain_share" in e else "")
+            + f". Read the command scaled (`--column u_{j}=SOURCE:*{f:.4g}`, or by the amplifier's known factor)")
+
+
+def flow_gain_cause(row: dict) -> str | None:
+    """What a calibration stand-in row (diagnosis.json's ``calibration.stand_ins`` item) with a
+    ``command_scale`` check says to check, one sentence; None without one."""
+    e = row.get("command_scale")
+    if not e:
+        return None
+    j, k = e["joint"], e["ratio"]
+    return (f"the calibrated valve on {j} passes {k:.3g} times the spec's flow per volt: the record moves that much "
+            f"{'faster' if k > 1.0 else 'slower'} per volt of command than the spec's valve lets it. Check the valve's "
+            f"rated flow (datasheet or type code), and the command's scale: a command logged in another scale than "
+            f"the valve saw (a 0..1 fraction or a controller output before its amplifier's gain, another unit) shows "
+            f"the same. Validation fit {fit_text(e['fit'])} as calibrated, " + _fix_text(e, j))
 
 
 def causes(result: dict, spec) -> list[str]:
@@ -92,14 +204,14 @@ def causes(result: dict, spec) -> list[str]:
     lines = []
     for j, e in (result or {}).get("joints", {}).items():
         unit = column_unit(f"q_{j}", spec)
-        k, f = e["ratio"], e["factor"]
+        share = e.get("model_flow_gain_share", 1.0)
         lines.append(
-            f"on {j} the recorded joint moves {k:.3g} times faster per volt of command than the calibrated model "
-            f"(record {e['record_speed_per_volt']:+.3g} {unit}/s per V, model {e['model_speed_per_volt']:+.3g}), and no "
+            f"on {j} the recorded joint moves {e['ratio']:.3g} times faster per volt of command than the spec's valve "
+            f"lets the model move (record {e['record_speed_per_volt']:+.3g} {unit}/s per V, calibrated model "
+            f"{e['model_speed_per_volt']:+.3g}"
+            + ("" if share == 1.0 else f" with its flow gain at {share:.3g} times the spec's") + "), and no "
             f"effect makes a joint faster than its valve: the command is logged in another scale than the valve saw "
             f"(a 0..1 fraction or a controller output before its amplifier's gain, another unit), or the valve is "
             f"larger than the spec's (joints.{j}.valve.rated_flow and its [estimated] range). Validation fit "
-            f"{fit_text(e['fit'])} as recorded, {fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g}"
-            + ("" if f == k else " (its largest value onto the end of the command range)")
-            + f". Read the command scaled (`--column u_{j}=SOURCE:*{f:.4g}`, or by the amplifier's known factor)")
+            f"{fit_text(e['fit'])} as recorded, " + _fix_text(e, j))
     return lines

@@ -30,7 +30,7 @@ from . import output_error as oe
 from . import blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, polarity
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
-from .beyond_range import stopped_at_an_end
+from .beyond_range import BeyondRange, stopped_at_an_end
 from .candidates import bank
 from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
                        residual_explained_pct, rivalry, unexplained_reasons, verdict)
@@ -542,10 +542,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "identified": cal.identified, "not_identified": [c["parameter"] for c in cal.changes if not c["identified"]],
              "switched_on": [f"{n}@{j}" if j else n for n, j in pl.switched],
              "recalibrations": recalibrations,
-             "stand_ins": [{"parameter": fp.key, "value": value,
-                            "in_place_of": {"effect": ev.candidate.effect, "joint": ev.candidate.joint,
-                                            "params": {k: _num(v) for k, v in ev.effect_params().items()}},
-                            "score": round(s_with, 3), "score_with_effect": round(s_effect, 3)}
+             "stand_ins": [_stand_in(ev, fp, value, s_with, s_effect, m0, base_acc, vrec, vfast, vprob.n, split, base_out)
                            for ev, fp, value, s_with, s_effect in sel.stand_ins]}
     tests = {"baseline": residual_tests(vrec, vprob, base_out, split),
              "extended": residual_tests(vrec, vprob, ext_out, split)}
@@ -565,7 +562,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             unexplained["command_null"] = nulls
             unexplained["record_causes"] = command_null.causes(nulls) + unexplained["record_causes"]
         # a command logged in another scale than the valve saw (a fraction, before an amplifier's gain)
-        scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
+        scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints,
+                                    command_scale.flow_gains(m0, base_acc, pl.free))
         if scale:
             unexplained["command_scale"] = scale
             unexplained["record_causes"] = command_scale.causes(scale, spec) + unexplained["record_causes"]
@@ -613,6 +611,24 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
 def _score(fits: dict, joints: list[str]) -> float:
     return float(np.mean([fits[j]["score"] for j in joints]))
+
+
+def _stand_in(ev, fp, value, s_with, s_effect, spec, model, vrec, runner, n, start, base_out) -> dict:
+    """A parameter calibrated in a named effect's place (decision.stand_in) as diagnosis.json's
+    ``calibration.stand_ins`` row. One freed beyond its declared range (beyond_range.BeyondRange) also
+    gives the spec's value and that range and, for a valve flow gain far off the spec's, the check of the
+    command's scale (command_scale.flow_gain) on the calibrated baseline ``model``."""
+    row = {"parameter": fp.key, "value": value,
+           "in_place_of": {"effect": ev.candidate.effect, "joint": ev.candidate.joint,
+                           "params": {k: _num(v) for k, v in ev.effect_params().items()}},
+           "score": round(s_with, 3), "score_with_effect": round(s_effect, 3)}
+    if isinstance(fp, BeyondRange):
+        row.update(nominal=float(fp.get(spec)), declared_range=[float(v) for v in fp.declared], unit=fp.unit)
+        flow = command_scale.flow_gains(spec, model, [fp]).get(fp.key.split(".")[1])
+        scale = flow and command_scale.flow_gain(model, vrec, runner, n, start, base_out, flow)
+        if scale:
+            row["command_scale"] = scale
+    return row
 
 
 def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, ext_fits: dict, ext_out: Outputs,

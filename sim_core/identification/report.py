@@ -490,6 +490,8 @@ def _calibration_html(data: dict) -> str:
                      + f"</td><td>{_refitted_cell(refitted.get(c['parameter']))}</td>"
                      + f"<td>{e(c.get('why', ''))}</td></tr>")
     parts.append("</table>")
+    parts += [f"<p><b class='bad'>Calibrated beyond a declared range</b>: {e(line)}.</p>"
+              for line in beyond_range.found(cal)]
     if cal.get("held"):
         parts.append("<details><summary>nominal parameters not freed</summary><ul>"
                      + "".join(f"<li>{e(k)}: {e(v)}</li>" for k, v in cal["held"].items()) + "</ul></details>")
@@ -602,6 +604,8 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
                      f"{('yes' + (f', {conditional.given(c)}' if c.get('conditional_on') else '')) if c['identified'] else 'no (kept nominal)'} | "
                      f"{_fmt(refitted[c['parameter']]['value']) if c['parameter'] in refitted else '-'} |")
     lines.append("")
+    found = beyond_range.found(data["calibration"])
+    lines += [f"Calibrated beyond a declared range: {line}." for line in found] + ([""] if found else [])
     lines.append("| joint | baseline fit | extended fit |")
     lines.append("|---|---|---|")
     for j, f in d.baseline_fits.items():
