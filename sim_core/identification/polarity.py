@@ -28,6 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..dataset import column_unit
 from .closed_loop import direction
 from .metrics import nrmse_fit
 from .record import Record
@@ -87,7 +88,7 @@ def causes(result: dict, spec) -> list[str]:
     for j, e in (result or {}).get("joints", {}).items():
         if not e["reversed"]:
             continue
-        unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
+        unit = column_unit(f"q_{j}", spec)
         said = (f"on {j} the recorded position moves against the command where the model's moves with it (record "
                 f"{e['record']['speed_per_volt']:+.3g} {unit}/s per V of command, correlation "
                 f"{e['record']['correlation']:+.2f}; model {e['model']['speed_per_volt']:+.3g} {unit}/s per V, "
