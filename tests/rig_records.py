@@ -146,12 +146,13 @@ def measured(rig_dir, keys: dict[str, float]) -> None:
         assert estimable(spec, key)[1] == float(value) and key not in spec.estimated, key
 
 
-def diagnose_log(cli, root, name: str, joint: str, command_unit: str = "") -> tuple[dict, str]:
-    """``diagnose`` of ``root/log.csv`` (headerless: time, sensor volts, command) on the rig in ``root/rig``
-    as a user reads it, the command in ``command_unit`` (e.g. ':*2-10'); the report in ``root/name``.
-    Returns diagnosis.json and what was printed."""
+def diagnose_log(cli, root, name: str, joint: str, command_unit: str = "",
+                 position_unit: str = ":sensor_volts") -> tuple[dict, str]:
+    """``diagnose`` of ``root/log.csv`` (headerless: time, position, command) on the rig in ``root/rig``
+    as a user reads it, the command in ``command_unit`` (e.g. ':*2-10'), the position in
+    ``position_unit`` ('' for SI); the report in ``root/name``. Returns diagnosis.json and what was printed."""
     proc = cli("diagnose", "--robot", root / "rig", root / "log.csv", "--no-header", "--column", "time=0",
-               "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2{command_unit}", "--report",
+               "--column", f"q_{joint}=1{position_unit}", "--column", f"u_{joint}=2{command_unit}", "--report",
                root / name, "--quiet")
     assert proc.returncode == 0, proc.stderr
     assert "RuntimeWarning" not in proc.stderr

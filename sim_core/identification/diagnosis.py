@@ -27,7 +27,8 @@ import numpy as np
 
 from ..dataset import column_unit
 from . import output_error as oe
-from . import blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, polarity
+from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, outside_range,
+               polarity)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .beyond_range import BeyondRange, stopped_at_an_end
@@ -562,11 +563,21 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             unexplained["command_null"] = nulls
             unexplained["record_causes"] = command_null.causes(nulls) + unexplained["record_causes"]
         # a command logged in another scale than the valve saw (a fraction, before an amplifier's gain)
-        scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints,
+        # (not on a joint whose position lies outside its range: its speeds are in another unit's scale)
+        outside = {j: s for j, s in check.outside_range.items() if outside_range.named(s)}
+        scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out,
+                                    [j for j in vprob.joints if j not in outside],
                                     command_scale.flow_gains(m0, base_acc, pl.free))
         if scale:
             unexplained["command_scale"] = scale
             unexplained["record_causes"] = command_scale.causes(scale, spec) + unexplained["record_causes"]
+    if unexplained:
+        tree = spec.tree
+        unexplained["record_causes"] = [
+            outside_range.cause(j, s, rec.angles[j], float(tree.lower[tree.index(spec.joint(j).dof)]),
+                                float(tree.upper[tree.index(spec.joint(j).dof)]), column_unit(f"q_{j}", spec))
+            for j, s in check.outside_range.items() if outside_range.named(s) and j in rec.angles
+        ] + unexplained["record_causes"]
     if unexplained and check.held_at_extreme:
         unexplained["record_causes"] = [held_at_extreme.cause(j, f, column_unit(f"q_{j}", spec))
                                         for j, f in check.held_at_extreme.items()] + unexplained["record_causes"]

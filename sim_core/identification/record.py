@@ -22,7 +22,7 @@ import numpy as np
 
 from ..dataset import Dataset, DatasetError, column_unit, input_matrix
 from ..ingest.timegrid import SLOW_RATE_HZ, unit_hint
-from . import held_at_extreme
+from . import held_at_extreme, outside_range
 from .metrics import fit_ceiling, noise_std
 
 ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
@@ -107,6 +107,7 @@ class DataCheck:
     initial_pose_source: dict[str, str]        # 'spec' or 'data'
     fit_ceiling: dict[str, float]              # best angle fit a perfect model reaches (noise floor)
     held_at_extreme: dict[str, dict] = field(default_factory=dict)  # held_at_extreme.find per joint
+    outside_range: dict[str, float] = field(default_factory=dict)  # share of samples outside the joint's range
 
     def to_dict(self) -> dict:
         return {
@@ -114,7 +115,7 @@ class DataCheck:
             "noise_rad": self.noise, "end_stop_share": self.end_stop_share,
             "command_saturation_share": self.command_saturation_share,
             "initial_pose_source": self.initial_pose_source, "fit_ceiling": self.fit_ceiling,
-            "held_at_extreme": self.held_at_extreme,
+            "held_at_extreme": self.held_at_extreme, "outside_range_share": self.outside_range,
         }
 
 
@@ -293,7 +294,7 @@ def check_record(rec: Record, spec) -> DataCheck:
     """The checks before anything else (research note §4.0)."""
     d = np.diff(rec.time)
     tree = spec.tree
-    noise, stops, sat, src, ceiling = {}, {}, {}, {}, {}
+    noise, stops, sat, src, ceiling, outside = {}, {}, {}, {}, {}, {}
     for j, y in rec.angles.items():
         noise[j] = noise_std(y)
         i = tree.index(spec.joint(j).dof)
@@ -304,11 +305,12 @@ def check_record(rec: Record, spec) -> DataCheck:
         if math.isfinite(hi):
             near |= y > hi - END_STOP_MARGIN
         stops[j] = float(near.mean())
-        out = (y < lo - 0.1) | (y > hi + 0.1) if math.isfinite(lo) and math.isfinite(hi) else np.zeros(y.size, bool)
-        if out.any():
+        outside[j] = outside_range.share(y, lo, hi)
+        if outside[j] > 0.0:
             unit = column_unit(f"q_{j}", spec)
-            rec.notes.append(f"q_{j}: {100 * out.mean():.0f} % of the samples lie more than 0.1 {unit} outside the joint's "
-                             f"range [{lo:.3f}, {hi:.3f}] {unit}: check the units ({unit}) and the sensor calibration")
+            rec.notes.append(f"q_{j}: {100 * outside[j]:.0f} % of the samples lie more than {outside_range.MARGIN:g} {unit} "
+                             f"outside the joint's range [{lo:.3f}, {hi:.3f}] {unit}: check the units ({unit}) and the "
+                             f"sensor calibration")
         src[j] = "spec" if rec.pose_kind == "true" else "data"
         ceiling[j] = fit_ceiling(y, noise[j])
     held = {}
@@ -324,4 +326,4 @@ def check_record(rec: Record, spec) -> DataCheck:
                 held[j] = found
                 rec.notes.append(held_at_extreme.note(j, found, column_unit(f"q_{j}", spec)))
     return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling,
-                     held)
+                     held, outside)

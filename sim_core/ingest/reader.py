@@ -21,7 +21,7 @@ from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
 from .text import TextLayout, open_text, parse_delimiter, read_columns
 from .timegrid import TimeGrid, check_grid, regular_grid
-from .units import Unit, parse_unit
+from .units import Unit, allowed, parse_unit, readings_inside
 
 MEASURED_KINDS = ("angle", "position", "pressure")
 POSITION_KINDS = ("angle", "position")     # where a glitch is physically impossible (the joint's inertia)
@@ -216,7 +216,7 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
             check_command_range(v, spec.joint(joint), where=where, label=f"{m.name} ({labels[i]})", place=place,
                                 hint=f"; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)")
         if kind in ("angle", "position") and joint is not None:
-            _note_outside_range(v, m, u, spec, joint, notes)
+            _note_outside_range(raw[:, i], v, m, u, spec, joint, notes)
         v = v[keep]
         columns[m.name] = v
         reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found))
@@ -246,7 +246,9 @@ def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
         raise DatasetError(f"--column {m.text!r}: {exc}") from None
 
 
-def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[str]) -> None:
+def _note_outside_range(raw, v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[str]) -> None:
+    """A note where position samples ``v`` (SI, from ``raw`` in unit ``u``) lie outside the joint's
+    range, with the units under which the raw values lie inside it."""
     tree = spec.tree
     i = tree.index(spec.joint(joint).dof)
     lo, hi = float(tree.lower[i]), float(tree.upper[i])
@@ -254,9 +256,20 @@ def _note_outside_range(v, m: ColumnMap, u: Unit, spec, joint: str, notes: list[
         return
     out = (v < lo - OUTSIDE_RANGE_MARGIN) | (v > hi + OUTSIDE_RANGE_MARGIN)
     if out.any():
+        kind = u.kind
+        names = [n for n in allowed(kind, spec.joint(joint).sensed) if n != "*SCALE+OFFSET" and n != u.text]
+        readings = {}
+        for n in names:
+            try:
+                readings[n] = _unit(ColumnMap(m.name, m.source, n, m.text), spec, None)
+            except DatasetError:
+                continue
+        fits = readings_inside(raw, readings, lo, hi, OUTSIDE_RANGE_MARGIN)
+        hint = (" (read as " + " or ".join(f"{n} (--column {m.name}={m.source}:{n})" for n in fits)
+                + " they lie inside it)") if fits else ""
         notes.append(f"{m.name}: {100 * out.mean():.3g} % of the samples lie more than {OUTSIDE_RANGE_MARGIN:g} {u.si} "
                      f"outside the joint's range [{lo:.4g}, {hi:.4g}] {u.si}: check the unit ({u.text}) and the sensor "
-                     f"calibration")
+                     f"calibration{hint}")
 
 
 def _glitch_check(raw: np.ndarray, policy: str, where: str, label: str, unit: Unit, place,
