@@ -62,6 +62,15 @@ def test_the_cause_names_the_joint_the_ratio_and_the_fix():
     assert "and the flow gain at 1.03 times the spec's (inside its declared range)" in said
 
 
+def test_a_command_already_at_its_range_end_is_not_read_scaled():
+    e = {"record_speed_per_volt": 17.8, "model_speed_per_volt": 0.305, "ratio": 58.3, "factor": 1.0,
+         "fit": -9.8, "fit_command_scaled": -9.8}
+    (said,) = causes({"joints": {"swing": e}}, load_robot("hydrolek"))
+    assert "already reaches its range's end" in said and "--column u_swing" not in said
+    (said,) = causes({"joints": {"swing": {**e, "factor": 1.1 * SCALE_LIMIT}}}, load_robot("hydrolek"))
+    assert "already reaches" not in said and f"`--column u_swing=SOURCE:*{1.1 * SCALE_LIMIT:.4g}`" in said
+
+
 def test_a_flow_gain_is_off_scale_beyond_the_limit_either_way():
     assert off_scale(1.1 * SCALE_LIMIT) and not off_scale(0.9 * SCALE_LIMIT)
     assert off_scale(1.0 / (1.1 * SCALE_LIMIT)) and not off_scale(1.0 / (0.9 * SCALE_LIMIT))

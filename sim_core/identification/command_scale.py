@@ -175,9 +175,21 @@ def flow_gain(model, rec: Record, runner, n: int, start: int, base_out, flow: Fl
             **replayed(model, rec, runner, n, start, j, k, flow)}
 
 
+def explained_by_scale(e: dict) -> bool:
+    """Whether the command's scale can account for a ratio (:func:`replayed`'s factor): not where the
+    logged command already reaches (nearly) the end of its range, so that reading it larger leaves no
+    more than a flow gain's tolerance (SCALE_LIMIT) of the ratio to take."""
+    return e["factor"] >= SCALE_LIMIT or e["factor"] <= 1.0 / SCALE_LIMIT
+
+
 def _fix_text(e: dict, j: str) -> str:
-    """The replayed fix (:func:`replayed`'s keys) and how to read the command so."""
+    """The replayed fix (:func:`replayed`'s keys) and how to read the command so; where the command's
+    scale cannot account for the ratio, what to check instead."""
     f = e["factor"]
+    if not explained_by_scale(e):
+        return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g} onto the end of its range. "
+                f"The logged command already reaches its range's end, so it is not logged smaller than the valve saw: "
+                f"check the position's unit and the sensor model (joints.{j}.sensor.A), and the valve's rated flow")
     return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g}"
             + ("" if f == e["ratio"] else " (its largest value onto the end of the command range)")
             + (f" and the flow gain at {e['flow_gain_share']:.3g} times the spec's (inside its declared range)"
