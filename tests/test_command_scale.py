@@ -14,7 +14,7 @@ from conftest import run_cli
 from rig_records import diagnose_log, rig_log
 from sim_core.identification.beyond_range import found
 from sim_core.identification.command_scale import (FULL_SCALE_SHARE, SCALE_LIMIT, FlowGain, causes, factor, off_scale,
-                                                   ratio, too_fast)
+                                                   ratio, reversed_causes, too_fast)
 from sim_core.identification.polarity import CORRELATION_MIN
 from sim_core.model.spec import load_robot
 
@@ -69,6 +69,14 @@ def test_a_command_already_at_its_range_end_is_not_read_scaled():
     assert "already reaches its range's end" in said and "--column u_swing" not in said
     (said,) = causes({"joints": {"swing": {**e, "factor": 1.1 * SCALE_LIMIT}}}, load_robot("hydrolek"))
     assert "already reaches" not in said and f"`--column u_swing=SOURCE:*{1.1 * SCALE_LIMIT:.4g}`" in said
+
+
+def test_a_command_both_reversed_and_scaled_is_read_with_a_negative_factor():
+    e = {"record_speed_per_volt": -0.148, "model_speed_per_volt": 0.0156, "ratio": 9.48, "factor": -10.0,
+         "fit": -38.2, "fit_command_scaled": 94.8, "flow_gain_share": 0.948}
+    (said,) = reversed_causes({"joints": {"j2": e}}, load_robot("hydrolek"))
+    assert "moves against its command and 9.48 times faster" in said and "both reversed and in another scale" in said
+    assert "94.8 % with the command scaled by -10 (its largest value" in said and "`--column u_j2=SOURCE:*-10`" in said
 
 
 def test_a_flow_gain_is_off_scale_beyond_the_limit_either_way():
@@ -174,4 +182,19 @@ def test_a_flow_gain_freed_far_beyond_its_range_names_the_scale(cli, tmp_path_fa
     fixed, fixed_printed = diagnose_log(cli, root, "scaled", "lift", ":*20")
     assert fixed["calibration"]["stand_ins"] == [] and "beyond a declared range" not in fixed_printed
     assert lo <= _flow_gain(fixed)["value"] <= hi
+
+
+def test_a_command_logged_reversed_and_as_a_fraction_is_read_with_both(cli, tmp_path_factory):
+    """-u/10 under P: the sign check finds the joint moving against its command and neither reversal
+    alone explains it; reversed and scaled by 10 it does."""
+    root = cylinder_log(tmp_path_factory, "reversed_tenth", -10.0, seed=31, ti=None)
+    d, printed = diagnose_log(cli, root, "as_logged", "lift")
+    assert d["verdict"] == "unexplained_discrepancy"
+    assert d["unexplained"]["polarity"]["joints"]["lift"]["reversed"]
+    e = d["unexplained"]["command_reversed_scale"]["joints"]["lift"]
+    assert e["factor"] == pytest.approx(-10.0, rel=1e-3) and 10.0 / 3 < e["ratio"] < 10.0 * 3
+    assert e["fit_command_scaled"] > e["fit"] + 20
+    assert "u_lift=SOURCE:*-10`" in printed
+    fixed, _ = diagnose_log(cli, root, "read_back", "lift", ":*-10")
+    assert fixed["verdict"] == "no_significant_discrepancy", fixed.get("unexplained")
 

@@ -72,7 +72,7 @@ def _entry(fit, cmd, pos):
     ((-95.0, None, 88.0), "position"),    # a diverged replay counts as no fit
 ])
 def test_the_reversal_named_is_the_one_that_explains_the_record(fits, best):
-    assert polarity._better(_entry(*fits)) == best
+    assert polarity.explains(_entry(*fits)) == best
 
 
 def test_the_causes_say_what_to_change():

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..dataset import column_unit
 from .polarity import CORRELATION_MIN, evidence, fit_text, points, replay_fit
+from .polarity import explains as polarity_explains
 from .record import Record
 
 # how many times faster per volt the record must move than the calibrated model: a flow gain off its
@@ -73,15 +74,17 @@ def flow_gains(spec, model, free) -> dict[str, FlowGain]:
     return out
 
 
-def replayed(model, rec: Record, runner, n: int, start: int, j: str, k: float, flow: FlowGain | None) -> dict:
+def replayed(model, rec: Record, runner, n: int, start: int, j: str, k: float, flow: FlowGain | None,
+             sign: float = 1.0) -> dict:
     """The fix of a record moving ``k`` times faster per volt on joint ``j`` than the spec's valve:
-    the scale to read the command with (:func:`factor`) and the validation angle fit (points, samples
+    the scale to read the command with (:func:`factor`; times ``sign``, -1 for a command also logged
+    reversed) and the validation angle fit (points, samples
     ``start``..``n``) of ``model`` with the command so scaled and its flow gain (``flow``) at the one of
     two values inside its declared range that replays the record better: the calibrated one (fitted
     beside the model's other parameters) or the rest of ``k`` (what the speeds per volt ask)."""
     f = factor(k, rec.u(j), model.joint(j).command_range)
     U = rec.U.copy()
-    U[:, rec.joint_names.index(j)] *= f
+    U[:, rec.joint_names.index(j)] *= sign * f
     scaled = replace(rec, U=U)
     gains = [None]
     if flow is not None and flow.nominal > 0.0:
@@ -95,7 +98,7 @@ def replayed(model, rec: Record, runner, n: int, start: int, j: str, k: float, f
         fit = replay_fit(rec, j, runner.simulate(spec, n, rec=scaled), start, n)
         if best is None or fit > best[1]:
             best = (gain, fit)
-    out = {"factor": float(f"{f:.4g}")}
+    out = {"factor": float(f"{sign * f:.4g}")}
     if best[0] is not None:
         out.update(flow_gain=float(f"{best[0]:.4g}"), flow_gain_share=round(best[0] / flow.nominal, 4))
     out["fit_command_scaled"] = points(best[1])
@@ -157,6 +160,50 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
                                       f"command, each correlation at least {CORRELATION_MIN:g})")}
 
 
+def reversed_check(model, rec: Record, runner, n: int, start: int, signs: dict,
+                   flows: dict[str, FlowGain] | None = None) -> dict:
+    """Of the joints the sign check found moving against their command (``signs``: polarity.check's
+    result) where neither reversal alone explains the record, those that also move more than
+    SCALE_LIMIT times faster per volt than the spec's valve (the speeds' sizes, as :func:`check`
+    counts them), with the fix of both replayed on the calibrated model ``model``: the command
+    reversed and scaled (:func:`replayed`). {} when there is none."""
+    flows = flows or {}
+    found = {}
+    for j, e in (signs or {}).get("joints", {}).items():
+        if not e.get("reversed") or "fit" not in e or polarity_explains(e) is not None:
+            continue
+        r, m = e["record"], e["model"]
+        k_model = ratio({**r, "speed_per_volt": abs(r["speed_per_volt"]), "correlation": abs(r["correlation"])},
+                        {**m, "speed_per_volt": abs(m["speed_per_volt"]), "correlation": abs(m["correlation"])})
+        if k_model is None:
+            continue
+        share = flows[j].share if j in flows else 1.0
+        k = k_model * share
+        if not too_fast(k):
+            continue
+        found[j] = {"record_speed_per_volt": r["speed_per_volt"], "model_speed_per_volt": m["speed_per_volt"],
+                    "model_flow_gain_share": round(share, 4), "ratio": round(k, 4), "fit": e["fit"],
+                    **replayed(model, rec, runner, n, start, j, k, flows.get(j), sign=-1.0)}
+    if not found:
+        return {}
+    return {"joints": found, "rule": (f"the record moves against its command and more than {SCALE_LIMIT:g} times faster "
+                                      f"per volt than the spec's valve lets the model move, and neither reversal alone "
+                                      f"explains it")}
+
+
+def reversed_causes(result: dict, spec) -> list[str]:
+    """What :func:`reversed_check` found, one sentence per joint."""
+    lines = []
+    for j, e in (result or {}).get("joints", {}).items():
+        unit = column_unit(f"q_{j}", spec)
+        lines.append(
+            f"on {j} the recorded joint moves against its command and {e['ratio']:.3g} times faster per volt than the "
+            f"spec's valve lets the model move (record {e['record_speed_per_volt']:+.3g} {unit}/s per V, calibrated "
+            f"model {e['model_speed_per_volt']:+.3g}): the command is logged both reversed and in another scale than "
+            f"the valve saw. Validation fit {fit_text(e['fit'])} as recorded, " + _fix_text(e, j))
+    return lines
+
+
 def off_scale(k: float) -> bool:
     """Whether a calibrated flow gain ``k`` times the spec's is more than a datasheet's tolerance can be."""
     return k > SCALE_LIMIT or 0.0 < k < 1.0 / SCALE_LIMIT
@@ -179,7 +226,7 @@ def explained_by_scale(e: dict) -> bool:
     """Whether the command's scale can account for a ratio (:func:`replayed`'s factor): not where the
     logged command already reaches (nearly) the end of its range, so that reading it larger leaves no
     more than a flow gain's tolerance (SCALE_LIMIT) of the ratio to take."""
-    return e["factor"] >= SCALE_LIMIT or e["factor"] <= 1.0 / SCALE_LIMIT
+    return abs(e["factor"]) >= SCALE_LIMIT or abs(e["factor"]) <= 1.0 / SCALE_LIMIT
 
 
 def _fix_text(e: dict, j: str) -> str:
@@ -191,7 +238,7 @@ def _fix_text(e: dict, j: str) -> str:
                 f"The logged command already reaches its range's end, so it is not logged smaller than the valve saw: "
                 f"check the position's unit and the sensor model (joints.{j}.sensor.A), and the valve's rated flow")
     return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g}"
-            + ("" if f == e["ratio"] else " (its largest value onto the end of the command range)")
+            + ("" if abs(f) == e["ratio"] else " (its largest value onto the end of the command range)")
             + (f" and the flow gain at {e['flow_gain_share']:.3g} times the spec's (inside its declared range)"
                if "flow_gain_share" in e else "")
             + f". Read the command scaled (`--column u_{j}=SOURCE:*{f:.4g}`, or by the amplifier's known factor)")

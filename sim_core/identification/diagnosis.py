@@ -554,9 +554,15 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
         # bank: say so, with the replay that fixes it
         signs = polarity.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
+        flows = command_scale.flow_gains(m0, base_acc, pl.free)
         if signs:
             unexplained["polarity"] = signs
-            unexplained["record_causes"] = polarity.causes(signs, spec) + unexplained["record_causes"]
+            # a command logged both reversed and in another scale: neither reversal alone explains it
+            both = command_scale.reversed_check(base_acc, vrec, vfast, vprob.n, split, signs, flows)
+            if both:
+                unexplained["command_reversed_scale"] = both
+            unexplained["record_causes"] = (polarity.causes(signs, spec) + command_scale.reversed_causes(both, spec)
+                                            + unexplained["record_causes"])
         # a command whose zero is not the valve's null (a unipolar output nulled mid-range) likewise
         nulls = command_null.check(base_acc, vrec, vfast, vprob.n, split, base_out, vprob.joints)
         if nulls:
@@ -566,8 +572,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # (not on a joint whose position lies outside its range: its speeds are in another unit's scale)
         outside = {j: s for j, s in check.outside_range.items() if outside_range.named(s)}
         scale = command_scale.check(base_acc, vrec, vfast, vprob.n, split, base_out,
-                                    [j for j in vprob.joints if j not in outside],
-                                    command_scale.flow_gains(m0, base_acc, pl.free))
+                                    [j for j in vprob.joints if j not in outside], flows)
         if scale:
             unexplained["command_scale"] = scale
             unexplained["record_causes"] = command_scale.causes(scale, spec) + unexplained["record_causes"]

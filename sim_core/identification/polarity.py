@@ -96,7 +96,7 @@ def causes(result: dict, spec) -> list[str]:
                 f"convention of the rig differs from its spec's, which no parameter or effect reverses. Validation fit "
                 f"{fit_text(e['fit'])} as recorded, {fit_text(e['fit_command_reversed'])} with the command reversed, "
                 f"{fit_text(e['fit_position_mirrored'])} with the position mirrored")
-        best = _better(e)
+        best = explains(e)
         if best == "command":
             said += (f". The command reversed explains it: the valve (or its amplifier) is wired the other way round "
                      f"from the spec; read the command reversed (`--column u_{j}=SOURCE:*-1`) or swap the valve's leads")
@@ -118,7 +118,7 @@ def causes(result: dict, spec) -> list[str]:
 EXPLAINS_MARGIN = 20.0    # points a fix must gain over the record as is, and over the other fix
 
 
-def _better(e: dict) -> str | None:
+def explains(e: dict) -> str | None:
     """The reversal that explains the record: at least ``EXPLAINS_MARGIN`` points above the fit as
     recorded and above the other reversal, and a positive fit."""
     base = _val(e["fit"])
