@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..dataset import column_unit
+from ..ingest import pressure_band
 from . import output_error as oe
 from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, outside_range,
                polarity)
@@ -582,7 +583,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             outside_range.cause(j, s, rec.angles[j], float(tree.lower[tree.index(spec.joint(j).dof)]),
                                 float(tree.upper[tree.index(spec.joint(j).dof)]), column_unit(f"q_{j}", spec))
             for j, s in check.outside_range.items() if outside_range.named(s) and j in rec.angles
-        ] + unexplained["record_causes"]
+        ] + pressure_band.causes({col: (why, rec.pressures[col[2:-2]][col.endswith("_b")])
+                                  for col, why in check.implausible_pressures.items()}, spec) + unexplained["record_causes"]
     if unexplained and check.held_at_extreme:
         unexplained["record_causes"] = [held_at_extreme.cause(j, f, column_unit(f"q_{j}", spec))
                                         for j, f in check.held_at_extreme.items()] + unexplained["record_causes"]

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import Dataset, DatasetError, column_unit, input_matrix
+from ..ingest import pressure_band
 from ..ingest.timegrid import SLOW_RATE_HZ, unit_hint
 from . import held_at_extreme, outside_range
 from .metrics import fit_ceiling, noise_std
@@ -108,6 +109,7 @@ class DataCheck:
     fit_ceiling: dict[str, float]              # best angle fit a perfect model reaches (noise floor)
     held_at_extreme: dict[str, dict] = field(default_factory=dict)  # held_at_extreme.find per joint
     outside_range: dict[str, float] = field(default_factory=dict)  # share of samples outside the joint's range
+    implausible_pressures: dict[str, str] = field(default_factory=dict)  # column -> why no chamber holds it
 
     def to_dict(self) -> dict:
         return {
@@ -116,6 +118,7 @@ class DataCheck:
             "command_saturation_share": self.command_saturation_share,
             "initial_pose_source": self.initial_pose_source, "fit_ceiling": self.fit_ceiling,
             "held_at_extreme": self.held_at_extreme, "outside_range_share": self.outside_range,
+            "implausible_pressures": self.implausible_pressures,
         }
 
 
@@ -325,5 +328,11 @@ def check_record(rec: Record, spec) -> DataCheck:
             if found is not None:
                 held[j] = found
                 rec.notes.append(held_at_extreme.note(j, found, column_unit(f"q_{j}", spec)))
+    implausible = {}
+    for j, pair in rec.pressures.items():
+        for side, p in zip("ab", pair):
+            why = pressure_band.implausible(p, spec)
+            if why is not None:
+                implausible[f"p_{j}_{side}"] = why
     return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling,
-                     held, outside)
+                     held, outside, implausible)

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from ..dataset import Dataset, DatasetError, check_command_range, check_time, read_dataset
+from . import pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .glitches import Glitches, find_glitches, repaired
 from .options import ReadOptions
@@ -217,6 +218,11 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
                                 hint=f"; check the unit (--column {m.name}=SOURCE:V|mV|*SCALE+OFFSET)")
         if kind in ("angle", "position") and joint is not None:
             _note_outside_range(raw[:, i], v, m, u, spec, joint, notes)
+        if kind == "pressure":
+            why = pressure_band.implausible(v, spec)
+            if why is not None:
+                notes.append(f"{m.name}: {why}: no chamber of the circuit holds that; check the unit ({u.text})"
+                             + (pressure_band.hint(raw[:, i], m.name, m.source, spec, u.text) if not u.counts else ""))
         v = v[keep]
         columns[m.name] = v
         reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found))
