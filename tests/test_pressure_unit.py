@@ -13,8 +13,8 @@ import pytest
 
 from conftest import run_cli
 
-from sim_core.ingest.pressure_band import (OUTSIDE_SHARE, RELIEF_FACTOR, SMALL_SHARE, band, causes, implausible,
-                                           plausible_readings)
+from sim_core.ingest.pressure_band import (OUTSIDE_SHARE, RELIEF_FACTOR, SMALL_SHARE, alternatives, band, causes,
+                                           implausible, plausible_readings)
 from sim_core.ingest.units import UNITS, parse_unit
 from sim_core.model.spec import load_robot
 
@@ -31,16 +31,18 @@ def chamber(n=500):
 
 def test_a_chamber_within_the_circuit_is_plausible_and_off_by_a_unit_is_not():
     p = chamber()
-    assert implausible(p, SPEC) is None
-    assert "the largest is" in implausible(p / 1e5, SPEC)                  # bar read as Pa
-    assert "outside" in implausible(p * 1e5, SPEC)                          # Pa read as bar
-    assert implausible(np.zeros(50), SPEC) is not None                      # no transducer
+    assert implausible(p, SPEC, []) is None
+    assert "the largest is" in implausible(p / 1e5, SPEC, ["bar"])          # bar read as Pa
+    assert "outside" in implausible(p * 1e5, SPEC, [])                      # Pa read as bar
     lo, hi = band(SPEC)
     assert lo < SPEC.get("fluid.cavitation_pressure") and hi == pytest.approx(RELIEF_FACTOR * SPEC.get("supply.relief_pressure"))
     just = np.full(100, 1.1 * SMALL_SHARE * SUPPLY)
-    assert implausible(just, SPEC) is None and implausible(just / 1.2, SPEC) is not None
+    assert implausible(just, SPEC, ["kPa"]) is None and implausible(just / 1.2, SPEC, ["kPa"]) is not None
+    assert implausible(just / 1.2, SPEC, []) is None             # small, but no unit fits: a chamber at tank
+    assert alternatives(np.full(50, 2e5), SPEC, "Pa") == []       # ... as a return side at 2 bar is
+    assert alternatives(np.zeros(50), SPEC, "Pa") == []           # ... or an unconnected transducer
     over = np.where(np.arange(100) < 100 * (OUTSIDE_SHARE - 0.1), 2 * hi, 5e6)
-    assert implausible(over, SPEC) is None                                  # a minority of spikes is no unit
+    assert implausible(over, SPEC, []) is None                              # a minority of spikes is no unit
 
 
 @pytest.mark.parametrize("unit", ["kPa", "bar", "MPa", "psi"])
@@ -51,7 +53,7 @@ def test_the_one_reading_that_fits_is_the_unit_the_pressure_was_logged_in(unit):
 
 def test_the_cause_groups_the_columns_and_gives_the_factor():
     p = chamber() / 1e5
-    found = {c: (implausible(p, SPEC), p) for c in ("p_j2_a", "p_j2_b")}
+    found = {c: (implausible(p, SPEC, ["bar"]), p) for c in ("p_j2_a", "p_j2_b")}
     (said,) = causes(found, SPEC)
     assert said.startswith("p_j2_a, p_j2_b: the largest is") and "x 100000 (bar read as Pa)" in said
     assert "`--column COLUMN=SOURCE:bar`" in said

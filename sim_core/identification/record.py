@@ -331,7 +331,7 @@ def check_record(rec: Record, spec) -> DataCheck:
     implausible = {}
     for j, pair in rec.pressures.items():
         for side, p in zip("ab", pair):
-            why = pressure_band.implausible(p, spec)
+            why = pressure_band.implausible(p, spec, pressure_band.alternatives(p, spec, "Pa"))
             if why is not None:
                 implausible[f"p_{j}_{side}"] = why
     return DataCheck(rec.rate, float(rec.time[-1]), float(d.max() / np.median(d)), noise, stops, sat, src, ceiling,

@@ -5,9 +5,9 @@ rod-side chamber under an overrunning load goes above the relief by its area rat
 leaves room for that), and a chamber the valve connects to the supply reaches a good share of it. A
 log in bar read as Pa holds 70 "Pa" on a 140 bar circuit, one in Pa read as bar 1e11 Pa: the
 calibration then fits supply and loads to pressures no pump makes. The named units of pressure lie
-7-100 times apart, so a column outside the band, or never above ``SMALL_SHARE`` of the supply, is in
-another unit, and the units under which it lies inside the band and reaches ``REACH_SHARE`` of the
-supply are the ones to read it in.
+7-100 times apart, so a column outside the band, or never above ``SMALL_SHARE`` of the supply where
+another unit would fit it, is in another unit, and the units under which it lies inside the band and
+reaches ``REACH_SHARE`` of the supply are the ones to read it in.
 """
 
 from __future__ import annotations
@@ -30,8 +30,10 @@ def band(spec) -> tuple[float, float]:
     return float(spec.get("fluid.cavitation_pressure")) - CAVITATION_MARGIN, RELIEF_FACTOR * relief
 
 
-def implausible(p, spec) -> str | None:
-    """Why the pressures ``p`` (Pa) cannot be a chamber's of ``spec``'s circuit, else None."""
+def implausible(p, spec, fits: list[str]) -> str | None:
+    """Why the pressures ``p`` (Pa) cannot be a chamber's of ``spec``'s circuit, else None. ``fits``: the
+    units under which the column would fit (:func:`alternatives`); a column only small is flagged only
+    with one (a chamber that stays at tank, or a transducer left unconnected, is not a unit's doing)."""
     p = np.asarray(p, float)
     p = p[np.isfinite(p)]
     if not p.size:
@@ -43,7 +45,7 @@ def implausible(p, spec) -> str | None:
         return (f"{100 * outside:.3g} % of the samples lie outside [{lo:.4g}, {hi:.4g}] Pa (from the oil's cavitation "
                 f"to {RELIEF_FACTOR:g} x the relief setting)")
     top = float(np.max(np.abs(p)))
-    if top < SMALL_SHARE * supply:
+    if top < SMALL_SHARE * supply and fits:
         return f"the largest is {top:.4g} Pa, {100 * top / supply:.2g} % of the supply pressure {supply:.4g} Pa"
     return None
 
@@ -63,10 +65,14 @@ def plausible_readings(raw, readings: dict[str, Unit], spec) -> list[str]:
     return out
 
 
-def hint(raw, column: str, source, spec, used: str) -> str:
-    """The readings of the column other than the unit ``used`` that put it in the band, as options."""
-    readings = {n: parse_unit(n, "pressure", column=column) for n in UNITS["pressure"] if n != used}
-    fits = plausible_readings(raw, readings, spec)
+def alternatives(raw, spec, used: str) -> list[str]:
+    """The named units other than ``used`` under which a column's ``raw`` values fit the circuit."""
+    return plausible_readings(raw, {n: parse_unit(n, "pressure", column="p") for n in UNITS["pressure"] if n != used},
+                              spec)
+
+
+def hint(fits: list[str], column: str, source) -> str:
+    """The readings ``fits`` (:func:`alternatives`) as options."""
     return "; read as " + " or ".join(f"{n} (`--column {column}={source}:{n}`)" for n in fits) + " it fits" if fits else ""
 
 
@@ -77,7 +83,7 @@ def causes(found: dict[str, tuple[str, np.ndarray]], spec) -> list[str]:
     readings = {n: parse_unit(n, "pressure", column="p") for n in UNITS["pressure"] if n != "Pa"}
     groups: dict[tuple[str, ...], list[str]] = {}
     for column, (_, p) in found.items():
-        groups.setdefault(tuple(plausible_readings(p, readings, spec)), []).append(column)
+        groups.setdefault(tuple(alternatives(p, spec, "Pa")), []).append(column)
     lines = []
     for fits, columns in groups.items():
         said = "".join(f"; the values x {readings[n].scale:.6g} ({n} read as Pa) fit (`--column COLUMN=SOURCE:{n}` "

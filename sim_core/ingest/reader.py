@@ -219,10 +219,11 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
         if kind in ("angle", "position") and joint is not None:
             _note_outside_range(raw[:, i], v, m, u, spec, joint, notes)
         if kind == "pressure":
-            why = pressure_band.implausible(v, spec)
+            fits = [] if u.counts else pressure_band.alternatives(raw[:, i], spec, u.text)
+            why = pressure_band.implausible(v, spec, fits)
             if why is not None:
                 notes.append(f"{m.name}: {why}: no chamber of the circuit holds that; check the unit ({u.text})"
-                             + (pressure_band.hint(raw[:, i], m.name, m.source, spec, u.text) if not u.counts else ""))
+                             + pressure_band.hint(fits, m.name, m.source))
         v = v[keep]
         columns[m.name] = v
         reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found))
