@@ -131,6 +131,20 @@ def too_fast(k: float | None) -> bool:
     return k is not None and k > SCALE_LIMIT
 
 
+def against_spec(record: dict, model: dict, flow: FlowGain | None) -> float | None:
+    """How many times faster per volt the record moves than the spec's valve lets the model move: the
+    :func:`ratio` to the calibrated model times its flow gain's share of the spec's (``flow``; None: the
+    model's is the spec's); None where :func:`ratio` is."""
+    k = ratio(record, model)
+    return None if k is None else k * (flow.share if flow is not None else 1.0)
+
+
+def _speeds(record: dict, model: dict, flow: FlowGain | None, k: float) -> dict:
+    return {"record_speed_per_volt": float(f"{record['speed_per_volt']:.6g}"),
+            "model_speed_per_volt": float(f"{model['speed_per_volt']:.6g}"),
+            "model_flow_gain_share": round(flow.share if flow is not None else 1.0, 4), "ratio": round(k, 4)}
+
+
 def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[str],
           flows: dict[str, FlowGain] | None = None) -> dict:
     """The scale check on the first ``n`` samples of the calibrated baseline model ``spec`` (``flows``:
@@ -141,17 +155,10 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
     found = {}
     for j, e in evidence(rec, base_out, spec, joints, n).items():
         r, m = e["record"], e["model"]
-        k_model = ratio(r, m)
-        if k_model is None:
-            continue
-        share = flows[j].share if j in flows else 1.0
-        k = k_model * share
-        if not too_fast(k):
-            continue
-        found[j] = {"record_speed_per_volt": float(f"{r['speed_per_volt']:.6g}"),
-                    "model_speed_per_volt": float(f"{m['speed_per_volt']:.6g}"), "model_flow_gain_share": round(share, 4),
-                    "ratio": round(k, 4), "fit": points(replay_fit(rec, j, base_out, start, n)),
-                    **replayed(spec, rec, runner, n, start, j, k, flows.get(j))}
+        k = against_spec(r, m, flows.get(j))
+        if too_fast(k):
+            found[j] = {**_speeds(r, m, flows.get(j), k), "fit": points(replay_fit(rec, j, base_out, start, n)),
+                        **replayed(spec, rec, runner, n, start, j, k, flows.get(j))}
     if not found:
         return {}
     return {"joints": found, "rule": (f"the record moves more than {SCALE_LIMIT:g} times faster per volt of command than "
@@ -173,17 +180,10 @@ def reversed_check(model, rec: Record, runner, n: int, start: int, signs: dict,
         if not e.get("reversed") or "fit" not in e or polarity_explains(e) is not None:
             continue
         r, m = e["record"], e["model"]
-        k_model = ratio({**r, "speed_per_volt": abs(r["speed_per_volt"]), "correlation": abs(r["correlation"])},
-                        {**m, "speed_per_volt": abs(m["speed_per_volt"]), "correlation": abs(m["correlation"])})
-        if k_model is None:
-            continue
-        share = flows[j].share if j in flows else 1.0
-        k = k_model * share
-        if not too_fast(k):
-            continue
-        found[j] = {"record_speed_per_volt": r["speed_per_volt"], "model_speed_per_volt": m["speed_per_volt"],
-                    "model_flow_gain_share": round(share, 4), "ratio": round(k, 4), "fit": e["fit"],
-                    **replayed(model, rec, runner, n, start, j, k, flows.get(j), sign=-1.0)}
+        k = against_spec({key: abs(v) for key, v in r.items()}, {key: abs(v) for key, v in m.items()}, flows.get(j))
+        if too_fast(k):
+            found[j] = {**_speeds(r, m, flows.get(j), k), "fit": e["fit"],
+                        **replayed(model, rec, runner, n, start, j, k, flows.get(j), sign=-1.0)}
     if not found:
         return {}
     return {"joints": found, "rule": (f"the record moves against its command and more than {SCALE_LIMIT:g} times faster "
