@@ -578,13 +578,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             unexplained["command_scale"] = scale
             unexplained["record_causes"] = command_scale.causes(scale, spec) + unexplained["record_causes"]
     if unexplained:
-        tree = spec.tree
-        unexplained["record_causes"] = [
-            outside_range.cause(j, s, rec.angles[j], float(tree.lower[tree.index(spec.joint(j).dof)]),
-                                float(tree.upper[tree.index(spec.joint(j).dof)]), column_unit(f"q_{j}", spec))
-            for j, s in check.outside_range.items() if outside_range.named(s) and j in rec.angles
-        ] + pressure_band.causes({col: (why, rec.pressures[col[2:-2]][col.endswith("_b")])
-                                  for col, why in check.implausible_pressures.items()}, spec) + unexplained["record_causes"]
+        unexplained["record_causes"] = _unit_causes(check, rec, spec) + unexplained["record_causes"]
     if unexplained and check.held_at_extreme:
         unexplained["record_causes"] = [held_at_extreme.cause(j, f, column_unit(f"q_{j}", spec))
                                         for j, f in check.held_at_extreme.items()] + unexplained["record_causes"]
@@ -629,6 +623,20 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
 def _score(fits: dict, joints: list[str]) -> float:
     return float(np.mean([fits[j]["score"] for j in joints]))
+
+
+def _unit_causes(check: DataCheck, rec: Record, spec) -> list[str]:
+    """A position outside its joint's range and pressures no chamber holds (the record check's
+    findings): columns read in another unit than they were logged in, first among a record's causes."""
+    tree = spec.tree
+    lines = []
+    for j, share in check.outside_range.items():
+        if outside_range.named(share) and j in rec.angles:
+            i = tree.index(spec.joint(j).dof)
+            lines.append(outside_range.cause(j, share, rec.angles[j], float(tree.lower[i]), float(tree.upper[i]),
+                                             column_unit(f"q_{j}", spec)))
+    found = {col: (why, rec.pressures[col[2:-2]][col.endswith("_b")]) for col, why in check.implausible_pressures.items()}
+    return lines + pressure_band.causes(found, spec)
 
 
 def _stand_in(ev, fp, value, s_with, s_effect, spec, model, vrec, runner, n, start, base_out) -> dict:
