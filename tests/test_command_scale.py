@@ -67,6 +67,7 @@ def test_a_command_already_at_its_range_end_is_not_read_scaled():
          "fit": -9.8, "fit_command_scaled": -9.8}
     (said,) = causes({"joints": {"swing": e}}, load_robot("hydrolek"))
     assert "already reaches its range's end" in said and "--column u_swing" not in said
+    assert "the time column's unit" in said
     (said,) = causes({"joints": {"swing": {**e, "factor": 1.1 * SCALE_LIMIT}}}, load_robot("hydrolek"))
     assert "already reaches" not in said and f"`--column u_swing=SOURCE:*{1.1 * SCALE_LIMIT:.4g}`" in said
 

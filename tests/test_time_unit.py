@@ -13,7 +13,8 @@ import pytest
 
 from sim_core.dataset import Dataset, DatasetError
 from sim_core.identification.record import record_from_dataset
-from sim_core.ingest.timegrid import SLOW_RATE_HZ, unit_hint
+from sim_core.identification.record import MIN_DURATION
+from sim_core.ingest.timegrid import FAST_RATE_HZ, SLOW_RATE_HZ, short_hint, unit_hint
 from sim_core.model.spec import load_robot
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -103,3 +104,24 @@ def test_a_rate_given_too_low_is_noted(tmp_path):
                     "--column", "q_j2=0:sensor_volts", "--column", "u_j2=1:V")
     assert proc.returncode == 0, proc.stderr
     assert "check --rate" in proc.stdout
+
+
+def test_a_record_too_short_gets_the_minutes_that_read_it_long_enough():
+    minutes = short_hint(0.02 / 60.0, 20.0 / 60.0, MIN_DURATION)              # 20 s at 50 Hz, counted in minutes
+    assert ":*60 (a sample every 20 ms, 50 Hz, 20 s)" in minutes and ":*3600" not in minutes     # hours: 180 kHz
+    hours = short_hint(0.02 / 3600.0, 600.0 / 3600.0, MIN_DURATION)           # 10 min at 50 Hz, in hours
+    assert ":*3600 (a sample every 20 ms, 50 Hz, 600 s)" in hours and ":*60 " in hours   # minutes fit too
+    assert short_hint(0.02, 1.0, MIN_DURATION) == ""                           # a short 50 Hz record is short
+    assert ":*60" not in short_hint(1.0 / (1.1 * FAST_RATE_HZ) / 60.0, 1.0, MIN_DURATION)   # no logger runs that fast
+    assert short_hint(0.02 / 3600.0, 0.5 * MIN_DURATION / 3600.0, MIN_DURATION) == ""     # short in any unit
+
+
+def test_diagnose_refuses_minutes_read_as_seconds_with_the_unit(tmp_path):
+    raw = np.loadtxt(LOG, delimiter=",")
+    raw[:, 0] = (raw[:, 0] - raw[0, 0]) * 1e-3 / 60.0          # the 20 s log's time in minutes
+    log = tmp_path / "minutes.csv"
+    np.savetxt(log, raw, delimiter=",", fmt="%.8f")
+    proc = hydrohil("diagnose", "--robot", "hydrolek", log, "--column", "time=0", *COLUMNS, "--report", tmp_path / "r")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "column 'time': the record lasts" in proc.stderr and "--column time=SOURCE:*60" in proc.stderr
+

@@ -236,7 +236,8 @@ def _fix_text(e: dict, j: str) -> str:
     if not explained_by_scale(e):
         return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g} onto the end of its range. "
                 f"The logged command already reaches its range's end, so it is not logged smaller than the valve saw: "
-                f"check the position's unit and the sensor model (joints.{j}.sensor.A), and the valve's rated flow")
+                f"check the position's unit and the sensor model (joints.{j}.sensor.A), the time column's unit (a "
+                f"time in minutes read as seconds makes every joint 60 times faster) and the valve's rated flow")
     return (f"{fit_text(e['fit_command_scaled'])} with the command scaled by {f:.4g}"
             + ("" if abs(f) == e["ratio"] else " (its largest value onto the end of the command range)")
             + (f" and the flow gain at {e['flow_gain_share']:.3g} times the spec's (inside its declared range)"

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..dataset import Dataset, DatasetError, column_unit, input_matrix
 from ..ingest import pressure_band
-from ..ingest.timegrid import SLOW_RATE_HZ, unit_hint
+from ..ingest.timegrid import SLOW_RATE_HZ, short_hint, unit_hint
 from . import held_at_extreme, outside_range
 from .metrics import fit_ceiling, noise_std
 
@@ -148,7 +148,8 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
                            f"needs at least {SLOW_RATE_HZ:g} Hz (the command is replayed held between samples, and "
                            f"what the model's effects do happens within 0.01-0.1 s); {unit_hint(period)}")
     if t[-1] < MIN_DURATION:
-        raise DatasetError(f"{where}column 'time': the record lasts {t[-1]:g} s; identification needs at least {MIN_DURATION:g} s")
+        raise DatasetError(f"{where}column 'time': the record lasts {t[-1]:g} s; identification needs at least {MIN_DURATION:g} s"
+                           + short_hint(period, float(t[-1]), MIN_DURATION))
     notes: list[str] = []
     angles: dict[str, np.ndarray] = {}
     for j in spec.joint_names:

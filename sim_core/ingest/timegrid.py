@@ -34,6 +34,21 @@ def unit_hint(median_period_s: float) -> str:
     return "check the time column's unit"
 
 
+FAST_RATE_HZ = 1e4      # no hydraulic rig's logger samples faster: a time column read too short beyond it
+
+
+def short_hint(median_period_s: float, duration_s: float, min_duration_s: float) -> str:
+    """What a record too short to identify may be: a time column counting minutes or hours read as
+    seconds, each where that reading gives at least ``min_duration_s`` at a logger's rate; else ''."""
+    out = ""
+    for unit, factor, name in ((":*60", 60.0, "minutes"), (":*3600", 3600.0, "hours")):
+        period, duration = median_period_s * factor, duration_s * factor
+        if duration >= min_duration_s and SLOW_RATE_HZ <= 1.0 / period <= FAST_RATE_HZ:
+            out += (f"; if the time column counts {name}, read it with --column time=SOURCE{unit} (a sample every "
+                    f"{1e3 * period:.4g} ms, {1.0 / period:.4g} Hz, {duration:.4g} s)")
+    return out
+
+
 @dataclass
 class TimeGrid:
     """What the time column looked like (figures in s and % of the median period)."""
