@@ -23,14 +23,13 @@ their median, is replayed on the baseline model.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
 from ..effects.valve_offset import SPAN
 from .closed_loop import unsaturated
 from .metrics import velocity
-from .polarity import fit_text, points, replay_fit
+from .polarity import fit_text, points, replay_fit, with_command
 from .record import END_STOP_MARGIN, Record
 
 STILL_SPEED = 0.02        # share of the joint's 95th-percentile speed below which it stands still
@@ -100,9 +99,7 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
                             (float(spec.tree.lower[i]), float(spec.tree.upper[i])))
         if not off_null(rest, rng):
             continue
-        U = rec.U.copy()
-        U[:, rec.joint_names.index(j)] -= rest["median"]
-        shifted = runner.simulate(spec, n, rec=replace(rec, U=U))
+        shifted = runner.simulate(spec, n, rec=with_command(rec, j, shift=-rest["median"]))
         found[j] = {**{k: round(v, 4) for k, v in rest.items()}, "bound_v": round(bound(rng), 4),
                     "read_as": read_as(rest["median"], rec.u(j), rng),
                     "fit": points(replay_fit(rec, j, base_out, start, n)),

@@ -29,12 +29,12 @@ spec's (or under its inverse), is checked the same way (:func:`flow_gain`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..dataset import column_unit
-from .polarity import CORRELATION_MIN, evidence, fit_text, points, replay_fit
+from .polarity import CORRELATION_MIN, evidence, fit_text, points, replay_fit, with_command
 from .polarity import explains as polarity_explains
 from .record import Record
 
@@ -83,9 +83,7 @@ def replayed(model, rec: Record, runner, n: int, start: int, j: str, k: float, f
     two values inside its declared range that replays the record better: the calibrated one (fitted
     beside the model's other parameters) or the rest of ``k`` (what the speeds per volt ask)."""
     f = factor(k, rec.u(j), model.joint(j).command_range)
-    U = rec.U.copy()
-    U[:, rec.joint_names.index(j)] *= sign * f
-    scaled = replace(rec, U=U)
+    scaled = with_command(rec, j, sign * f)
     gains = [None]
     if flow is not None and flow.nominal > 0.0:
         lo, hi = flow.declared

@@ -73,9 +73,7 @@ def check(spec, rec: Record, runner, n: int, start: int, base_out, joints: list[
                                   f"each at least {CORRELATION_MIN:g} in size")}
     for j in flagged:
         fit = replay_fit(rec, j, base_out, start, n)
-        U = rec.U.copy()
-        U[:, rec.joint_names.index(j)] *= -1.0
-        flipped = runner.simulate(spec, n, rec=replace(rec, U=U))
+        flipped = runner.simulate(spec, n, rec=with_command(rec, j, -1.0))
         mirrored = _best_mirror(spec, rec, runner, j, n, start)
         ev[j].update({"fit": points(fit), "fit_command_reversed": points(replay_fit(rec, j, flipped, start, n)),
                       "fit_position_mirrored": points(mirrored)})
@@ -173,6 +171,16 @@ def _best_mirror(spec, rec: Record, runner, j: str, n: int, start: int) -> float
                 a, x1 = x1, x2
                 x2 = a + g * (b - a)
     return max(seen.values())
+
+
+def with_command(rec: Record, j: str, scale: float = 1.0, shift: float = 0.0) -> Record:
+    """``rec`` with joint ``j``'s command read as ``scale * u + shift`` (V): the record a fix replays."""
+    U = rec.U.copy()
+    k = rec.joint_names.index(j)
+    U[:, k] *= scale
+    if shift:
+        U[:, k] += shift
+    return replace(rec, U=U)
 
 
 def replay_fit(rec: Record, j: str, out, start: int, n: int) -> float:
