@@ -12,20 +12,21 @@ import pytest
 
 from conftest import run_cli
 from rig_records import closed_loop_record, diagnose_log, write_headerless
-from sim_core.identification.outside_range import MAJORITY, MARGIN, cause, named, share
-from sim_core.ingest.units import INSIDE_SHARE, SPAN_SHARE, parse_unit, readings_inside
+from sim_core.identification.outside_range import MAJORITY, cause, named
+from sim_core.ingest.joint_range import INSIDE_SHARE, MARGIN, SPAN_SHARE, readings_inside, share
+from sim_core.ingest.units import parse_unit
 
 DEG = {"deg": parse_unit("deg", "angle", column="q")}
 
 
 def test_a_reading_is_suggested_where_it_puts_the_values_inside_the_range_and_spans_part_of_it():
     y = np.linspace(-60.0, 60.0, 201)                                 # degrees, a +-1.5 rad joint
-    assert readings_inside(y, DEG, -1.5, 1.5, MARGIN) == ["deg"]
-    assert readings_inside(y * 3.0, DEG, -1.5, 1.5, MARGIN) == []      # still outside read as deg
+    assert readings_inside(y, DEG, -1.5, 1.5) == ["deg"]
+    assert readings_inside(y * 3.0, DEG, -1.5, 1.5) == []      # still outside read as deg
     small = np.linspace(0.0, 0.5 * SPAN_SHARE * 3.0 / DEG["deg"].scale, 201)
-    assert readings_inside(small, DEG, -1.5, 1.5, MARGIN) == []       # inside, but spans too little to tell
+    assert readings_inside(small, DEG, -1.5, 1.5) == []       # inside, but spans too little to tell
     y[: int(len(y) * (1 - INSIDE_SHARE)) + 2] = 500.0                  # more than 1 % still outside
-    assert readings_inside(y, DEG, -1.5, 1.5, MARGIN) == []
+    assert readings_inside(y, DEG, -1.5, 1.5) == []
 
 
 def test_the_share_outside_counts_beyond_the_margin_and_a_majority_names_it():

@@ -4,29 +4,19 @@ The model's joint cannot leave its range (the URDF's limits are end stops), so a
 position lies mostly outside it cannot be explained by any parameter or effect, and what the record
 seems to say (a joint moving 57 times faster per volt than its valve: degrees read as radians) is
 the unit's doing, not the valve's. The record check measures the share of samples further than
-``MARGIN`` outside the range (``share``); where it is the majority the diagnosis names it
+``MARGIN`` outside the range (ingest/joint_range.share); where it is the majority the diagnosis names it
 (``cause``) before anything it would infer from the position's size, with the plain units under
 which the values lie inside the range.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from ..ingest.units import UNITS, parse_unit, readings_inside
+from ..ingest.joint_range import MARGIN, readings_inside
+from ..ingest.units import UNITS, parse_unit
 
-MARGIN = 0.1          # rad (m on a prismatic joint): further outside the range is no end-stop overshoot
 MAJORITY = 0.5        # share of the samples outside the range from which the position's unit is named
-
-
-def share(y, lo: float, hi: float) -> float:
-    """The share of the positions ``y`` further than MARGIN outside [lo, hi] (0 without finite limits)."""
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        return 0.0
-    y = np.asarray(y, float)
-    return float(np.mean((y < lo - MARGIN) | (y > hi + MARGIN))) if y.size else 0.0
 
 
 def named(s: float) -> bool:
@@ -40,7 +30,7 @@ def cause(j: str, s: float, y, lo: float, hi: float, unit: str) -> str:
     kind = "position" if unit == "m" else "angle"
     si = next(iter(UNITS[kind]))
     readings = {n: parse_unit(n, kind, column=f"q_{j}") for n in UNITS[kind] if n != si}
-    fits = readings_inside(y, readings, lo, hi, MARGIN)
+    fits = readings_inside(y, readings, lo, hi)
     hint = "".join(f"; the values read as {n} where they were read as {si} (x {readings[n].scale:.4g}) lie inside it "
                    f"(`--column q_{j}=SOURCE:{n}`)" for n in fits)
     y = np.asarray(y, float)

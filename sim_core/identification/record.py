@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import Dataset, DatasetError, column_unit, input_matrix
-from ..ingest import pressure_band
+from ..ingest import joint_range, pressure_band
 from ..ingest.timegrid import SLOW_RATE_HZ, short_hint, unit_hint
-from . import held_at_extreme, outside_range
+from . import held_at_extreme
 from .metrics import fit_ceiling, noise_std
 
 ESTIMATION_SHARE = 0.6      # single record: first 60 % estimation, last 40 % validation
@@ -309,10 +309,10 @@ def check_record(rec: Record, spec) -> DataCheck:
         if math.isfinite(hi):
             near |= y > hi - END_STOP_MARGIN
         stops[j] = float(near.mean())
-        outside[j] = outside_range.share(y, lo, hi)
+        outside[j] = joint_range.share(y, lo, hi)
         if outside[j] > 0.0:
             unit = column_unit(f"q_{j}", spec)
-            rec.notes.append(f"q_{j}: {100 * outside[j]:.0f} % of the samples lie more than {outside_range.MARGIN:g} {unit} "
+            rec.notes.append(f"q_{j}: {100 * outside[j]:.0f} % of the samples lie more than {joint_range.MARGIN:g} {unit} "
                              f"outside the joint's range [{lo:.3f}, {hi:.3f}] {unit}: check the units ({unit}) and the "
                              f"sensor calibration")
         src[j] = "spec" if rec.pose_kind == "true" else "data"

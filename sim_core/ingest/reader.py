@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from ..dataset import Dataset, DatasetError, check_command_range, check_time, read_dataset
-from . import pressure_band
+from . import joint_range, pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .glitches import Glitches, find_glitches, repaired
 from .options import ReadOptions
@@ -22,11 +22,10 @@ from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
 from .text import TextLayout, open_text, parse_delimiter, read_columns
 from .timegrid import TimeGrid, check_grid, regular_grid
-from .units import Unit, allowed, parse_unit, readings_inside
+from .units import Unit, allowed, parse_unit
 
 MEASURED_KINDS = ("angle", "position", "pressure")
 POSITION_KINDS = ("angle", "position")     # where a glitch is physically impossible (the joint's inertia)
-OUTSIDE_RANGE_MARGIN = 0.1      # rad (or m): further outside a joint's limits hints at a wrong unit
 
 
 @dataclass
@@ -261,8 +260,8 @@ def _note_outside_range(raw, v, m: ColumnMap, u: Unit, spec, joint: str, notes: 
     lo, hi = float(tree.lower[i]), float(tree.upper[i])
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return
-    out = (v < lo - OUTSIDE_RANGE_MARGIN) | (v > hi + OUTSIDE_RANGE_MARGIN)
-    if out.any():
+    outside = joint_range.share(v, lo, hi)
+    if outside > 0.0:
         kind = u.kind
         names = [n for n in allowed(kind, spec.joint(joint).sensed) if n != "*SCALE+OFFSET" and n != u.text]
         readings = {}
@@ -271,10 +270,10 @@ def _note_outside_range(raw, v, m: ColumnMap, u: Unit, spec, joint: str, notes: 
                 readings[n] = _unit(ColumnMap(m.name, m.source, n, m.text), spec, None)
             except DatasetError:
                 continue
-        fits = readings_inside(raw, readings, lo, hi, OUTSIDE_RANGE_MARGIN)
+        fits = joint_range.readings_inside(raw, readings, lo, hi)
         hint = (" (read as " + " or ".join(f"{n} (--column {m.name}={m.source}:{n})" for n in fits)
                 + " they lie inside it)") if fits else ""
-        notes.append(f"{m.name}: {100 * out.mean():.3g} % of the samples lie more than {OUTSIDE_RANGE_MARGIN:g} {u.si} "
+        notes.append(f"{m.name}: {100 * outside:.3g} % of the samples lie more than {joint_range.MARGIN:g} {u.si} "
                      f"outside the joint's range [{lo:.4g}, {hi:.4g}] {u.si}: check the unit ({u.text}) and the sensor "
                      f"calibration{hint}")
 

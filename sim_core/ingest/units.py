@@ -102,25 +102,3 @@ def parse_unit(text: str | None, kind: str, *, column: str, sensor: dict | None 
     raise ValueError(f"column {column}: unit {t!r} does not fit {KIND_TEXT[kind]}{why}; "
                      f"units for {column}: {', '.join(allowed(kind, sensor is not None))}")
 
-
-INSIDE_SHARE = 0.99     # of the samples a reading must put inside a joint's range to be suggested
-SPAN_SHARE = 0.05       # of the range the reading must span (any column read small enough lies inside)
-
-
-def readings_inside(raw, readings: dict[str, Unit], lo: float, hi: float, margin: float) -> list[str]:
-    """Of ``readings`` (a unit's text -> its Unit), those under which the ``raw`` values lie inside
-    [lo - margin, hi + margin] on at least INSIDE_SHARE of the samples and span at least SPAN_SHARE of
-    the range: the units a position that lies outside its joint's range was most likely logged in."""
-    import numpy as np
-
-    raw = np.asarray(raw, float)
-    raw = raw[np.isfinite(raw)]
-    out = []
-    if not len(raw) or not hi > lo:
-        return out
-    for text, unit in readings.items():
-        v = unit.convert(raw)
-        inside = np.mean((v >= lo - margin) & (v <= hi + margin))
-        if inside >= INSIDE_SHARE and float(np.ptp(v)) >= SPAN_SHARE * (hi - lo):
-            out.append(text)
-    return out
