@@ -179,6 +179,8 @@ def test_a_flow_gain_freed_far_beyond_its_range_names_the_scale(cli, tmp_path_fa
     assert 20.0 / 3 < e["ratio"] < 20.0 * 3 and e["factor"] == pytest.approx(20.0, rel=1e-3)
     assert lo <= e["flow_gain"] <= hi and e["fit_command_scaled"] > 90.0
     assert "calibrated beyond a declared range: joints.lift.valve.rated_flow" in printed
+    html = (root / "as_logged" / "report.html").read_text()
+    assert "Calibrated beyond a declared range</b>: joints.lift.valve.rated_flow" in html and "SOURCE:*20`" in html
     assert "u_lift=SOURCE:*20`" in printed
     fixed, fixed_printed = diagnose_log(cli, root, "scaled", "lift", ":*20")
     assert fixed["calibration"]["stand_ins"] == [] and "beyond a declared range" not in fixed_printed
