@@ -10,7 +10,9 @@ diagnosed with the real commands.
 
 * singles: every effect the bank offers on the joint (``candidates.bank``), one per seed; the
   magnitude of seed k of N is drawn from the k-th of N strata of the effect's range (``RANGES``, in
-  the actuator's own scales), so the seeds cover the range, not its middle; HydroLek's excitation
+  the actuator's own scales; a flow limit's share on HydroLek is taken of the largest flow its
+  open-loop record demands, 0.38-0.50 of the valve's full flow at the matrix's seeds: ``DEMAND_SCALED``), so
+  the seeds cover the range, not its middle; HydroLek's excitation
   cycles through PRBS (``hydrohil excite``), a multisine and operator-like doublets with holds; the
   rig's is closed-loop steps; the nominal model is off a few percent (valve flow, spool bandwidth,
   seal friction) and the angle noise is drawn in 0.2-1 mrad;
@@ -37,9 +39,9 @@ value off a gauge gets without diagnosing again.
 Each single also gets its hidden effect's trace: the RMS difference of the recorded angle with and
 without the effect (noise-free truths for HydroLek; the same closed-loop seed for the rig), printed
 as a multiple of the record's noise; a pair gets its fainter member's (the truth with both against
-the truth without that one). A case whose trace is below the noise (a flow limit the excitation
-never reaches) left nothing to find; the summary gives the share right among those whose effects
-show, beside the share of all.
+the truth without that one). A case whose trace is below the noise (a leak too small to move a
+closed loop, a pump limit behind a tighter valve limit) left nothing to find; the summary gives the
+share right among those whose effects show, beside the share of all.
 
     .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
         [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
@@ -111,6 +113,9 @@ OTHER_PAIRS = [("deadband", "coulomb_friction", "harvester", "boom"), ("deadband
                ("hysteresis", "backlash"), ("leakage", "delay"), ("flow_saturation", "deadband"),
                ("backlash", "coulomb_friction"), ("area_ratio", "deadband"), ("joint_compliance", "delay")]
 SENSOR_EFFECTS = {"sensor_offset", "sensor_gain"}   # told from the start pose: the HydroLek records are homed
+# drawn as a share of the valve's full-opening flow (``RANGES``), but on the open-loop records taken of the
+# largest flow the record demands (:func:`against_demand`); the rig's closed loop opens its valve fully
+DEMAND_SCALED = {"flow_saturation"}
 
 
 def cli(*args) -> None:
@@ -280,11 +285,13 @@ def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
         truth_robot = heavier_links(ROOT / "sim_core" / "robots" / robot, work / "truth_robot", case["heavier_links"])
     args = ["simulate", "--robot", truth_robot, "--input", inp, "--out", work / "measured.csv",
             "--noise-angle", case["noise"], "--seed", seed, *nominal_off(spec, joint, rng), *case.get("set", [])]
-    for name, j, params in case["hidden"]:
-        args += ["--effect", effect_arg(name, j, params)]
     if case.get("start_offset"):
         q0 = float(spec.joint(joint).settings["initial_position"]) + case["start_offset"]
         args += ["--set", f"joints.{joint}.initial_position={q0!r}"]
+    if any(name in DEMAND_SCALED for name, _, _ in case["hidden"]):
+        case["hidden"] = against_demand(case["hidden"], args, work, spec, joint)
+    for name, j, params in case["hidden"]:
+        args += ["--effect", effect_arg(name, j, params)]
     cli(*args)
     if case["hidden"] and case["group"] in ("singles", "pairs"):
         # the hidden effects' trace: the noise-free truth with all of them and without each one (a
@@ -300,6 +307,38 @@ def builtin_record(work: Path, case: dict) -> tuple[Path, str, list]:
     postprocess(work / "measured.csv", joint, case.get("quantum"), case.get("mode_hz"))
     options = ["--initial-pose", "spec"] if any(n in SENSOR_EFFECTS for n, _, _ in case["hidden"]) else []
     return work / "measured.csv", robot, options
+
+
+def demanded_flow(path: Path, spec, joint: str) -> float:
+    """The largest flow (m^3/s) the joint's actuator draws from the supply in a simulate output: the
+    bore's area x the extension speed or the annulus's x the retraction speed (a rotary actuator's
+    displacement x its speed), chamber compressibility aside."""
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    t, q = data["time"], data[f"q_{joint}"]
+    dq = np.gradient(q, t)
+    js = spec.joint(joint)
+    if js.kind == "cylinder":
+        cyl = js.components["cylinder"]
+        speed = cyl.arms(spec.tree, spec.tree.index(js.dof), q) * dq       # dL/dt, m/s
+        return float(max(cyl.area_a * max(speed.max(), 0.0), cyl.area_b * max(-speed.min(), 0.0)))
+    rot = js.components["rotary"]
+    return float(rot["displacement"] * rot["gear_ratio"] * np.abs(dq).max())
+
+
+def against_demand(hidden: list, args: list, work: Path, spec, joint: str) -> list:
+    """``hidden`` with each flow limit's drawn share of the valve's full-opening flow taken of the largest
+    flow the record demands instead (the noise-free truth with the other hidden effects, without the
+    limit): an open-loop excitation that opens the valve half way never demands its full flow, and a
+    limit above the flow demanded is no effect at all."""
+    quiet = _replace(_replace(args, "--noise-angle", 0.0), "--out", work / "demand.csv")
+    for name, j, params in hidden:
+        if name not in DEMAND_SCALED:
+            quiet += ["--effect", effect_arg(name, j, params)]
+    cli(*quiet)
+    q_full = actuator_scales(spec, joint)["q_full"]
+    demand = demanded_flow(work / "demand.csv", spec, joint)
+    return [(name, j, {k: v * demand / q_full for k, v in params.items()} if name in DEMAND_SCALED else params)
+            for name, j, params in hidden]
 
 
 def rig_record(work: Path, case: dict) -> tuple[Path, str, list]:
