@@ -10,8 +10,9 @@ diagnosed with the real commands.
 
 * singles: every effect the bank offers on the joint (``candidates.bank``), one per seed; the
   magnitude of seed k of N is drawn from the k-th of N strata of the effect's range (``RANGES``, in
-  the actuator's own scales; a flow limit's share on HydroLek is taken of the largest flow its
-  open-loop record demands, 0.38-0.50 of the valve's full flow at the matrix's seeds: ``DEMAND_SCALED``), so
+  the actuator's own scales; a flow limit's share (the valve's or the pump's) on HydroLek is taken of
+  the largest flow its open-loop record demands, 0.38-0.50 of the valve's full flow at the matrix's
+  seeds: ``DEMAND_SCALED``), so
   the seeds cover the range, not its middle; HydroLek's excitation
   cycles through PRBS (``hydrohil excite``), a multisine and operator-like doublets with holds; the
   rig's is closed-loop steps; the nominal model is off a few percent (valve flow, spool bandwidth,
@@ -40,8 +41,8 @@ Each single also gets its hidden effect's trace: the RMS difference of the recor
 without the effect (noise-free truths for HydroLek; the same closed-loop seed for the rig), printed
 as a multiple of the record's noise; a pair gets its fainter member's (the truth with both against
 the truth without that one). A case whose trace is below the noise (a leak too small to move a
-closed loop, a pump limit behind a tighter valve limit) left nothing to find; the summary gives the
-share right among those whose effects show, beside the share of all.
+closed loop, a joint's line dynamics on the rig that records no pressure) left nothing to find; the
+summary gives the share right among those whose effects show, beside the share of all.
 
     .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
         [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
@@ -113,9 +114,10 @@ OTHER_PAIRS = [("deadband", "coulomb_friction", "harvester", "boom"), ("deadband
                ("hysteresis", "backlash"), ("leakage", "delay"), ("flow_saturation", "deadband"),
                ("backlash", "coulomb_friction"), ("area_ratio", "deadband"), ("joint_compliance", "delay")]
 SENSOR_EFFECTS = {"sensor_offset", "sensor_gain"}   # told from the start pose: the HydroLek records are homed
-# drawn as a share of the valve's full-opening flow (``RANGES``), but on the open-loop records taken of the
-# largest flow the record demands (:func:`against_demand`); the rig's closed loop opens its valve fully
-DEMAND_SCALED = {"flow_saturation"}
+# flow limits, drawn as a share of the valve's full-opening flow (``RANGES``), but on the open-loop records
+# taken of the largest flow the record demands (:func:`against_demand`; the pump's is what the moving
+# joint draws); the rig's closed loop opens its valve fully
+DEMAND_SCALED = {"flow_saturation", "pump_limit"}
 
 
 def cli(*args) -> None:
@@ -328,7 +330,7 @@ def demanded_flow(path: Path, spec, joint: str) -> float:
 def against_demand(hidden: list, args: list, work: Path, spec, joint: str) -> list:
     """``hidden`` with each flow limit's drawn share of the valve's full-opening flow taken of the largest
     flow the record demands instead (the noise-free truth with the other hidden effects, without the
-    limit): an open-loop excitation that opens the valve half way never demands its full flow, and a
+    limits): an open-loop excitation that opens the valve half way never demands its full flow, and a
     limit above the flow demanded is no effect at all."""
     quiet = _replace(_replace(args, "--noise-angle", 0.0), "--out", work / "demand.csv")
     for name, j, params in hidden:
