@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from .missing import MAX_RUN, POLICIES as MISSING_POLICIES
+
 SATURATION_POLICIES = ("mask", "fail")
 GLITCH_POLICIES = ("repair", "keep", "fail")
 
@@ -19,13 +21,14 @@ class ReadOptions:
     skip_rows: int = 0                # lines before the header (or the data)
     saturation: str = "mask"          # converter saturation on a measured column: mask or fail
     glitches: str = "repair"          # 1-3 sample excursions of a position (ingest/glitches.py): repair, keep or fail
+    missing: str = "fail"             # empty or NaN cells (ingest/missing.py): fail, or repair runs of up to 3
 
     @property
     def given(self) -> bool:
         """Whether any option asks for more than reading a dataset file as it is (``glitches`` applies to a
         dataset file too)."""
         return bool(self.columns or self.no_header or self.delimiter is not None or self.rate is not None
-                    or self.skip_rows or self.saturation != "mask")
+                    or self.skip_rows or self.saturation != "mask" or self.missing != "fail")
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -59,6 +62,10 @@ def add_reading_options(p) -> None:
                    help="1-3 samples of a measured position that leave the signal and come back faster than the joint "
                         "moves anywhere else in the record (a wiper lifting, a loose connector): repair (replace them by "
                         "interpolation and say where; default), keep, or fail")
+    g.add_argument("--missing", choices=MISSING_POLICIES, default="fail",
+                   help="cells that hold no sample (empty, NaN, NA, #N/A, null: a logger's missed read): fail (an "
+                        f"error naming the column and row; default), or repair runs of up to {MAX_RUN} samples (a "
+                        "position, pressure or time interpolated, a command held at its value before) and say where")
 
 
 def options_from_args(args) -> ReadOptions:
@@ -70,4 +77,5 @@ def options_from_args(args) -> ReadOptions:
         skip_rows=int(getattr(args, "skip_rows", 0) or 0),
         saturation=getattr(args, "saturation", "mask"),
         glitches=getattr(args, "glitches", "repair"),
+        missing=getattr(args, "missing", "fail"),
     )

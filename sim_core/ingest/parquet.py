@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .missing import HINT as MISSING_HINT
+
 UNITS_KEY = b"hydrohil.units"
 ROBOT_KEY = b"hydrohil.robot"
 SUFFIXES = (".parquet", ".pq")
@@ -70,11 +72,12 @@ class ParquetTable:
         return ("date and time" if pa.types.is_timestamp(typ) else "time of day" if pa.types.is_time(typ)
                 else "duration" if pa.types.is_duration(typ) else None)
 
-    def columns(self, names: list[str], clock: int | None = None) -> np.ndarray:
+    def columns(self, names: list[str], clock: int | None = None, missing: bool = False) -> np.ndarray:
         """Columns ``names`` as float64 [rows, k], read in one pass; errors for text columns, missing
         and non-finite values name the column and row. ``clock``: the position of a column that may
         hold clock readings (timestamps, times of day, durations: the time column), read as seconds
-        from its first row (a time of day counted on past midnight)."""
+        from its first row (a time of day counted on past midnight). ``missing``: a null or NaN
+        (not a clock reading's) is read as NaN instead of being an error."""
         import pyarrow as pa
         import pyarrow.compute as pc
 
@@ -93,10 +96,13 @@ class ParquetTable:
         out = np.empty((table.num_rows, len(names)), order="F")     # column by column: contiguous copies
         for k, name in enumerate(names):
             col = table.column(name)
+            kind = self.clock_kind(name) if k == clock else None
+            if col.null_count and missing and not kind:
+                col = col.cast(pa.float64()).fill_null(float("nan"))
             if col.null_count:
                 r = int(pc.index(pc.is_null(col), True).as_py()) + 1
-                raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value)")
-            kind = self.clock_kind(name) if k == clock else None
+                raise _error(f"{self.path}: column {name!r}: row {r}: empty (a missing value"
+                             + ("" if kind else f"; {MISSING_HINT}") + ")")
             if kind:
                 ticks = pc.cast(col, pa.int64()).to_numpy()           # integer ticks: exact before scaling
                 out[:, k] = (ticks - ticks[0]) * {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[col.type.unit]
@@ -104,8 +110,9 @@ class ParquetTable:
                     out[:, k] = past_midnight(out[:, k])[0]
                 continue
             out[:, k] = col.to_numpy() if pa.types.is_float64(col.type) else col.cast(pa.float64()).to_numpy()
-            bad = np.flatnonzero(~np.isfinite(out[:, k]))
+            bad = np.flatnonzero(~(np.isfinite(out[:, k]) | (missing & np.isnan(out[:, k]))))
             if bad.size:
                 r = int(bad[0]) + 1
-                raise _error(f"{self.path}: column {name!r}: row {r}: {out[r - 1, k]} is not a finite number")
+                raise _error(f"{self.path}: column {name!r}: row {r}: {out[r - 1, k]} is not a finite number"
+                             + (f" (a missing value; {MISSING_HINT})" if np.isnan(out[r - 1, k]) else ""))
         return out

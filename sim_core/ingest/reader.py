@@ -17,6 +17,7 @@ from ..dataset import Dataset, DatasetError, check_command_range, check_time, re
 from . import joint_range, pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .glitches import Glitches, find_glitches, repaired
+from .missing import MAX_RUN, Missing, filled, longest_run, runs
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
@@ -39,13 +40,15 @@ class ColumnReport:
     max: float
     saturation: Saturation | None = None
     glitches: Glitches | None = None       # in the column's raw units
+    missing: Missing | None = None         # samples the log did not hold, filled (--missing repair)
 
     def to_dict(self) -> dict:
         return {"source": self.source, "unit": self.unit.text, "si_unit": self.unit.si,
                 "conversion": {"scale": self.unit.scale, "offset": self.unit.offset, "text": self.unit.describe()},
                 "min": self.min, "max": self.max,
                 "saturation": self.saturation.to_dict() if self.saturation else None,
-                "glitches": self.glitches.to_dict() if self.glitches else None}
+                "glitches": self.glitches.to_dict() if self.glitches else None,
+                "missing": self.missing.to_dict() if self.missing else None}
 
 
 @dataclass
@@ -83,6 +86,7 @@ class ImportResult:
         for c in self.columns:
             sat = f"  SATURATED {c.saturation.samples} sample(s)" if c.saturation else ""
             sat += f"  GLITCHES {c.glitches.samples} sample(s)" if c.glitches else ""
+            sat += f"  MISSING {c.missing.samples} sample(s) filled" if c.missing else ""
             out.append(f"  {c.name:<{w}} <- {c.source} ({c.unit.describe()}): {c.min:.6g} .. {c.max:.6g} {c.unit.si}{sat}")
         return out
 
@@ -169,6 +173,7 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
     raw, place = source.read([m.source for m in maps], [f"{m.name} ({lab})" for m, lab in zip(maps, labels)],
                              clock=k_time)
     rows = raw.shape[0]
+    gaps = _fill_missing(raw, maps, labels, spec, where, place, notes) if options.missing == "repair" else {}
 
     # time grid first: it decides which rows stay
     if has_time:
@@ -191,7 +196,7 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
     valid: dict[str, np.ndarray] = {}
     for i, (m, u) in enumerate(zip(maps, units)):
         if m.name == "time":
-            reports.append(ColumnReport("time", labels[i], u, 0.0, float(t[-1])))
+            reports.append(ColumnReport("time", labels[i], u, 0.0, float(t[-1]), missing=gaps.get("time")))
             continue
         kind, joint = column_kind(m.name, spec)
         found = None
@@ -225,7 +230,8 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
                              + pressure_band.hint(fits, m.name, m.source))
         v = v[keep]
         columns[m.name] = v
-        reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found))
+        reports.append(ColumnReport(m.name, labels[i], u, float(v.min()), float(v.max()), report_sat, found,
+                                    gaps.get(m.name)))
     order = dataset_order(columns, spec)
     ds = Dataset(order, np.column_stack([columns[c] for c in order]),
                  {r.name: r.unit.si for r in reports}, spec.name)
@@ -234,6 +240,36 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
         reports.insert(0, ColumnReport("time", f"--rate {options.rate:g} Hz", parse_unit(None, "time", column="time"),
                                        0.0, float(t[-1])))
     return ImportResult(str(path), spec.name, ds, reports, grid, notes, valid, options, [str(p) for p in paths])
+
+
+def _fill_missing(raw: np.ndarray, maps: list[ColumnMap], labels: list[str], spec, where: str, place,
+                  notes: list[str]) -> dict[str, Missing]:
+    """Fill, in place, each column's runs of up to MAX_RUN missing samples (NaN in ``raw``): a time or
+    measured column by interpolation, a command by the value before it (``ingest/missing.py``). A
+    longer run, or a column with nothing in it, is an error naming the rows."""
+    out = {}
+    for i, m in enumerate(maps):
+        gone = np.isnan(raw[:, i])
+        if not gone.any():
+            continue
+        label = f"column {m.name} ({labels[i]})"
+        if gone.all():
+            raise DatasetError(f"{where}{label}: every sample is missing")
+        a, b = longest_run(gone)
+        if b - a + 1 > MAX_RUN:
+            raise DatasetError(f"{where}{label}: {place(a + 1)} to {place(b + 1)}: {b - a + 1} missing samples in a row; "
+                               f"--missing repair fills runs of up to {MAX_RUN} (a logger's missed reads), not a gap in "
+                               f"the record: cut the file there, or read its parts separately")
+        kind = "time" if m.name == "time" else column_kind(m.name, spec)[0]
+        how = "carry" if kind == "time" else "hold" if kind == "command" else "line"
+        raw[:, i] = filled(raw[:, i], how)
+        found = Missing(int(gone.sum()), [(a + 1, b + 1) for a, b in runs(gone)],
+                        "the value before" if how == "hold" else "interpolation")
+        out[m.name] = found
+        notes.append(f"{label}: {found.samples} missing sample(s) in {len(found.runs)} run(s) (rows {found.rows_text()}): "
+                     f"filled by {found.filled_by}" + (" (a command is held between its samples)" if how == "hold" else "")
+                     + " (--missing repair)")
+    return out
 
 
 def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
@@ -385,10 +421,11 @@ class _TextSource(_Source):
         self.notes = self.layout.notes
         self.names = self.layout.names
         self.n_fields = self.layout.n_columns
+        self.missing = options.missing == "repair"
 
     def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        self._cols = read_columns(self.layout, idx, labels, cut_last_line=True, clock=clock)
+        self._cols = read_columns(self.layout, idx, labels, cut_last_line=True, clock=clock, missing=self.missing)
         self.clock = self._cols.clock
         return self._cols.data, lambda r: f"row {r} (line {self.line(r)})"
 
@@ -405,6 +442,7 @@ class _ParquetSource(_Source):
         self.names = self.table.names
         self.n_fields = len(self.names)
         self.notes = []
+        self.missing = options.missing == "repair"
         if self.table.rows == 0:
             raise DatasetError(f"{path}: no data rows")
 
@@ -413,7 +451,7 @@ class _ParquetSource(_Source):
 
     def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
-        data = self.table.columns([self.names[i] for i in idx], clock=clock)
+        data = self.table.columns([self.names[i] for i in idx], clock=clock, missing=self.missing)
         self.clock = self.table.clock_kind(self.names[idx[clock]]) if clock is not None else None
         if self.clock:
             self.notes.append(f"column {labels[clock]}: clock readings ({self.clock}), read as seconds from the first row")

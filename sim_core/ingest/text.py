@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from . import clock as clock_readings
+from .missing import HINT as MISSING_HINT
+from .missing import is_missing
 
 BINARY_PROBE = 8192             # bytes looked at to tell a text file from a binary one
 _NUMBER_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
@@ -211,12 +213,14 @@ def _delimiter_name(d: str | None) -> str:
 
 
 def read_columns(layout: TextLayout, indices: list[int], labels: list[str], *, cut_last_line: bool = False,
-                 clock: int | None = None) -> TextColumns:
+                 clock: int | None = None, missing: bool = False) -> TextColumns:
     """Columns ``indices`` (0-based) as float64 [rows, k]; ``labels`` name them in messages.
     ``cut_last_line``: a last row with too few values (a logger stopped mid-line) is dropped with a
     note instead of being an error. ``clock``: the position (in ``indices``) of a column that may
     hold clock readings (:mod:`.clock`, the time column): when its first cell is one, every cell
-    must be one of the same kind, read as seconds (a time of day past midnight counted on)."""
+    must be one of the same kind, read as seconds (a time of day past midnight counted on).
+    ``missing``: a cell that holds no sample (:func:`.missing.is_missing`) is read as NaN instead of
+    being an error."""
     reading = None
     if clock is not None:
         rows = _rows(layout)
@@ -228,11 +232,12 @@ def read_columns(layout: TextLayout, indices: list[int], labels: list[str], *, c
     if reading is None:
         data = _fast(layout, indices)
         if data is None or not np.isfinite(data).all():
-            return _slow(layout, indices, labels, cut_last_line)
+            return _slow(layout, indices, labels, cut_last_line, missing=missing)
         if data.shape[0] == 0:
             raise _error(f"{layout.path}: no data rows")
         return TextColumns(data, layout)
-    out = _slow(layout, indices, labels, cut_last_line, clock=(clock, reading, clock_readings.whole_seconds(cell)))
+    out = _slow(layout, indices, labels, cut_last_line, clock=(clock, reading, clock_readings.whole_seconds(cell)),
+                missing=missing)
     out.clock = reading
     passed = 0
     if reading == "time of day":
@@ -305,10 +310,10 @@ def _data_lines(layout: TextLayout) -> np.ndarray:
 
 
 def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_line: bool,
-          clock: tuple[int, str, int] | None = None) -> TextColumns:
+          clock: tuple[int, str, int] | None = None, missing: bool = False) -> TextColumns:
     """Line by line: the exact column, row and line of the first bad cell. ``clock``: (position,
     kind, whole seconds of the first reading) of a column of clock readings, read as seconds after
-    the first reading's whole second."""
+    the first reading's whole second. ``missing``: cells holding no sample read as NaN."""
     path, n = layout.path, layout.n_fields
     cols = [array.array("d") for _ in indices]
     lines = array.array("q")
@@ -330,10 +335,14 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
                          f"{layout.n_columns}")
         for k, c in enumerate(indices):
             cell = cells[c]
+            if missing and is_missing(cell) and (clock is None or k != clock[0]):     # not a clock reading's
+                cols[k].append(float("nan"))
+                continue
             if clock is not None and k == clock[0]:
                 r = clock_readings.reading(cell)
                 if r is None or r[0] != clock[1]:
-                    what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a {clock[1]}"
+                    what = f"is empty (a missing value; {MISSING_HINT})" if not cell.strip() else \
+                        f"{cell.strip()!r} is not a {clock[1]}"
                     raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}, where the first row "
                                  f"holds a {clock[1]} (the column is read as clock readings)")
                 cols[k].append(clock_readings.seconds_of(r, clock[2]))
@@ -341,13 +350,15 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
             try:
                 v = _to_float(cell, layout.decimal)
             except ValueError:
-                what = "is empty (a missing value)" if not cell.strip() else f"{cell.strip()!r} is not a number"
+                what = f"is empty (a missing value; {MISSING_HINT})" if not cell.strip() else \
+                    f"{cell.strip()!r} is not a number" + (f" (a missing value; {MISSING_HINT})" if is_missing(cell) else "")
                 if re.fullmatch(r"\d{4}-\d{2}-\d{2}", cell.strip()) and layout.delimiter is None:
                     what += (" but a date: with blanks between the columns a date and its time of day are two "
                              "columns; map the time of day as the time column")
                 raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {what}") from None
             if v != v or v in (float("inf"), float("-inf")):
-                raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {cell.strip()} is not a finite number")
+                raise _error(f"{path}: column {labels[k]}: row {row} (line {line}): {cell.strip()} is not a finite number"
+                             + (f" (a missing value; {MISSING_HINT})" if v != v else ""))
             cols[k].append(v)
         lines.append(line)
     if short is not None:
