@@ -9,6 +9,7 @@ a robot, converted to SI and checked (time grid, converter saturation, position 
     saturation.py  samples at a converter's full scale
     glitches.py    1-3 sample excursions of a position faster than the joint moves (repaired)
     missing.py     empty or NaN cells: refused, or runs of up to 3 filled (--missing repair)
+    runs.py        runs of flagged samples and the line that bridges them
     options.py     the reading options, one definition for every command
     reader.py      import_record / read_input: all of the above for one file
 """

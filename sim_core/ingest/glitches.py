@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import median_filter
 
+from .runs import bridged, runs
+
 MAX_RUN = 3            # samples: longer excursions are motion or saturation, not glitches
 NOISE_FACTOR = 8.0     # a candidate departs from the running median by more than this many noise sigmas
 SPEED_FACTOR = 2.0     # ... and from its clean neighbours by more than this times the record's fastest step
@@ -81,10 +83,10 @@ def find_glitches(y: np.ndarray) -> tuple[Glitches, np.ndarray] | None:
     candidate = rough & (departure > SPEED_FACTOR * fastest)
     if not candidate.any():
         return None
-    edges = np.diff(np.concatenate(([0], candidate.astype(np.int8), [0])))
     mask = np.zeros(n, dtype=bool)
     rows, largest = [], 0.0
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):   # run [a, b)
+    for a, last in runs(candidate):                      # run [a, b)
+        b = last + 1
         if b - a > MAX_RUN:
             continue
         if a == 0 or b == n:                              # at an end of the record: one neighbour
@@ -105,10 +107,6 @@ def find_glitches(y: np.ndarray) -> tuple[Glitches, np.ndarray] | None:
 
 
 def repaired(y: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``y`` with the samples under ``mask`` replaced by linear interpolation between the clean samples
-    either side (the nearest clean sample at an end of the record)."""
-    y = np.asarray(y, dtype=float).copy()
-    if mask.any() and not mask.all():
-        idx = np.arange(y.size)
-        y[mask] = np.interp(idx[mask], idx[~mask], y[~mask])
-    return y
+    """``y`` with the glitch samples under ``mask`` replaced by linear interpolation between the clean
+    samples either side (the nearest clean sample at an end of the record)."""
+    return bridged(y, mask)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .runs import bridged, runs
+
 MAX_RUN = 3        # samples in a row: more is a gap in the record, not a logger's missed read
 POLICIES = ("fail", "repair")
 # cells a logger writes for a sample it did not get (compared lower-case and stripped); "inf" is not
@@ -44,12 +46,6 @@ class Missing:
         return text + (", ..." if len(self.runs) > most else "")
 
 
-def runs(gone: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) 0-based indices of each run of True in ``gone``."""
-    edges = np.diff(np.concatenate(([0], gone.astype(np.int8), [0])))
-    return [(int(a), int(b) - 1) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
-
-
 def longest_run(gone: np.ndarray) -> tuple[int, int] | None:
     """The longest run of True in ``gone`` (0-based first, last), None if there is none."""
     found = runs(gone)
@@ -68,7 +64,7 @@ def filled(y: np.ndarray, how: str) -> np.ndarray:
         last = np.maximum.accumulate(np.where(gone, -1, k))
         out[gone] = np.where(last[gone] >= 0, y[np.maximum(last[gone], 0)], y[have[0]])
         return out
-    out[gone] = np.interp(k[gone], have, y[have])          # the nearest sample's value beyond the ends
+    out = bridged(y, gone)                                  # the nearest sample's value beyond the ends
     if how == "carry" and have.size >= 2:
         head, tail = k[gone & (k < have[0])], k[gone & (k > have[-1])]
         out[head] = y[have[0]] - (have[0] - head) * (y[have[1]] - y[have[0]]) / (have[1] - have[0])

@@ -17,7 +17,8 @@ from ..dataset import Dataset, DatasetError, check_command_range, check_time, re
 from . import joint_range, pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .glitches import Glitches, find_glitches, repaired
-from .missing import MAX_RUN, Missing, filled, longest_run, runs
+from .missing import MAX_RUN, Missing, filled, longest_run
+from .runs import runs
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
@@ -93,8 +94,7 @@ class ImportResult:
 
 def _false_runs(ok: np.ndarray) -> list[list[int]]:
     """[first, last] dataset rows (0-based) of each run of False."""
-    edges = np.diff(np.concatenate(([0], (~ok).astype(np.int8), [0])))
-    return [[int(a), int(b) - 1] for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    return [[a, b] for a, b in runs(~ok)]
 
 
 def read_input(path: str | Path, spec, options: ReadOptions | None = None) -> ImportResult:

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .runs import runs
 from .units import Unit
 
 BITS = (8, 10, 12, 14, 16, 18, 20, 24)
@@ -63,10 +64,7 @@ def find_saturation(raw: np.ndarray, unit: Unit) -> tuple[Saturation, np.ndarray
     at = (raw <= lo + tol) | (raw >= hi - tol)
     if not at.any():
         return None
-    edges = np.diff(np.concatenate(([0], at.astype(np.int8), [0])))
-    starts = np.flatnonzero(edges == 1)
-    ends = np.flatnonzero(edges == -1)       # exclusive
-    lengths = ends - starts
-    sat = Saturation((lo, hi), what, int(at.sum()), int(starts.size), int(lengths.max()), int(starts[0]) + 1,
-                     [(int(s) + 1, int(e)) for s, e in zip(starts[:20], ends[:20])])
+    found = runs(at)
+    sat = Saturation((lo, hi), what, int(at.sum()), len(found), max(b - a + 1 for a, b in found), found[0][0] + 1,
+                     [(a + 1, b + 1) for a, b in found[:20]])
     return sat, at
