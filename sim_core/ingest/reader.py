@@ -24,7 +24,7 @@ from .parquet import ParquetTable, is_parquet
 from .saturation import Saturation, find_saturation
 from .text import TextLayout, open_text, parse_delimiter, read_columns
 from .timegrid import TimeGrid, check_grid, regular_grid
-from .units import Unit, allowed, parse_unit
+from .units import KIND_TEXT, SENSOR_VOLTS, Unit, allowed, parse_unit, si_unit
 
 MEASURED_KINDS = ("angle", "position", "pressure")
 POSITION_KINDS = ("angle", "position")     # where a glitch is physically impossible (the joint's inertia)
@@ -272,8 +272,10 @@ def _fill_missing(raw: np.ndarray, maps: list[ColumnMap], labels: list[str], spe
     return out
 
 
-def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
-    """The column's unit: as given, else as the file's metadata says (Parquet), else SI."""
+def _unit(m: ColumnMap, spec, source: "_Source | None") -> Unit:
+    """The column's unit: as given, else as the file says (Parquet's metadata, a text table's row of
+    units), else SI. Volts the file gives a sensed joint's position are the sensor's volts; a units
+    row's cell that is no unit of the column is noted and the column read in SI."""
     kind, joint = column_kind(m.name, spec)
     text = m.unit if m.unit is not None else source.unit_of(source.names[source.resolve(m)]) if source.names else None
     sensor = None
@@ -282,9 +284,16 @@ def _unit(m: ColumnMap, spec, source: "_Source") -> Unit:
         if js.sensed:
             s = js.components["sensor"]
             sensor = {"A": s["A"], "B": s["B"], "range": s["range"]}
+    if m.unit is None and text == "V" and sensor is not None:
+        text = SENSOR_VOLTS
     try:
         return parse_unit(text, kind, column=m.name, sensor=sensor)
     except ValueError as exc:
+        if m.unit is None and text and source.unit_row:
+            source.notes.append(f"column {m.name} ({source.label(m)}): the row of units says {text!r}, no unit of "
+                                f"{KIND_TEXT[kind]}: read in {si_unit(kind)}; give its unit with --column "
+                                f"{m.name}={m.source}:UNIT ({', '.join(allowed(kind, sensor is not None))})")
+            return parse_unit(None, kind, column=m.name, sensor=sensor)
         raise DatasetError(f"--column {m.text!r}: {exc}") from None
 
 
@@ -386,6 +395,12 @@ class _Source:
     def unit_of(self, name: str) -> str | None:
         return None
 
+    @property
+    def unit_row(self) -> bool:
+        """Whether the units the file gives come from a row of units under a text header (a guess at
+        the columns' units, not metadata)."""
+        return False
+
     def label(self, m: ColumnMap) -> str:
         """Where column ``m`` comes from, for reports and messages ("column 3", "header 'pos'")."""
         return m.source_label
@@ -422,6 +437,14 @@ class _TextSource(_Source):
         self.names = self.layout.names
         self.n_fields = self.layout.n_columns
         self.missing = options.missing == "repair"
+
+    def unit_of(self, name: str) -> str | None:
+        units = self.layout.units
+        return units[self.names.index(name)] or None if units else None
+
+    @property
+    def unit_row(self) -> bool:
+        return self.layout.units is not None
 
     def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, f"{lab}")) for s, lab in zip(sources, labels)]
@@ -513,6 +536,10 @@ class _JoinedSource(_Source):
     def unit_of(self, name: str) -> str | None:
         k, _ = self._part(self.names.index(name))
         return self.parts[k].unit_of(name)
+
+    @property
+    def unit_row(self) -> bool:
+        return any(part.unit_row for part in self.parts)
 
     def read(self, sources, labels, clock=None):
         idx = [self.resolve(ColumnMap("", s, None, lab)) for s, lab in zip(sources, labels)]

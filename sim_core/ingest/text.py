@@ -25,6 +25,7 @@ from .missing import HINT as MISSING_HINT
 from .missing import is_missing
 
 BINARY_PROBE = 8192             # bytes looked at to tell a text file from a binary one
+COMMENT_MARKS = ("#", "%")      # a preamble's lines before the table (a logger's notes, MATLAB's '%')
 _NUMBER_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 DELIMITER_WORDS = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None, " ": None,
                    "comma": ",", "semicolon": ";"}
@@ -50,6 +51,7 @@ class TextLayout:
     notes: list[str] = field(default_factory=list)
 
     trailing: bool = False          # every row ends with a delimiter: one empty field more, not a column
+    units: list[str] | None = None  # a row of units under the header (s, V, bar ...), one per name, else None
 
     @property
     def n_columns(self) -> int:
@@ -144,8 +146,8 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
         offset = 3 if probe.startswith(b"\xef\xbb\xbf") else 0   # UTF-8 byte-order mark (spreadsheet exports)
         fh.seek(offset)
         lineno = 0
-        first: tuple[str, int, int] | None = None   # (text, line, offset) of the first non-blank line
-        second: tuple[str, int, int] | None = None
+        comments: list[tuple[str, int, int]] = []   # a preamble of comment lines before the table
+        lines: list[tuple[str, int, int]] = []      # (text, line, offset) of the first non-blank lines after it
         for raw in fh:
             lineno += 1
             start, offset = offset, offset + len(raw)
@@ -154,12 +156,22 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
             text = _decode(raw).rstrip("\r\n")
             if not text.strip():
                 continue
-            if first is None:
-                first = (text, lineno, start)
-            else:
-                second = (text, lineno, start)
+            if not lines and text.lstrip()[:1] in COMMENT_MARKS:
+                comments.append((text, lineno, start))
+                continue
+            lines.append((text, lineno, start))
+            if len(lines) == 3:
                 break
+    first, second, third = (lines + [None, None, None])[:3]
+    if comments:
+        mark = comments[0][0].lstrip()[0]
+        span = f"line {comments[0][1]}" if len(comments) == 1 else f"lines {comments[0][1]}-{comments[-1][1]}"
+        notes.append(f"{span} start{'s' if len(comments) == 1 else ''} with {mark!r}: a preamble, skipped")
+    preamble_note = len(notes) - 1
     if first is None:
+        if comments:
+            raise _error(f"{path}: nothing but comment lines ({len(comments)}, starting with "
+                         f"{comments[0][0].lstrip()[0]!r})")
         if skip_rows:
             raise _error(f"{path}: nothing left after skipping {skip_rows} line(s) (--skip-rows)")
         raise _error(f"{path}: empty file")
@@ -176,7 +188,13 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
             notes.append("decimal separator: comma (detected)")
     cells = [c.strip() for c in _split(first[0], delimiter)]
     if header is None:
-        header = not all(_is_number(c, decimal) or clock_readings.kind(c) for c in cells if c)
+        header = not _numbers_only(cells, decimal)
+        named = _commented_header(comments, delimiter, len(cells), decimal) if not header else None
+        if named is not None:
+            # the preamble's last line names the columns (numpy's savetxt writes "# time,q,u")
+            notes[preamble_note] += f"; its last line, line {comments[-1][1]}, names the columns"
+            return _with_units(TextLayout(path, delimiter, decimal, named, len(named), first[2], first[1], notes),
+                               first, second, decimal)
         if not header:
             notes.append(f"no header row: line {first[1]} holds numbers only, read as data (columns by 0-based index)")
     if not header:
@@ -196,7 +214,56 @@ def open_text(path: str | Path, *, header: bool | None = None, delimiter: str | 
     trailing = len(data_cells) == len(names) + 1 and not data_cells[-1].strip()
     if trailing:
         notes.append("every row ends with a delimiter: the empty field after it is not a column")
-    return TextLayout(path, delimiter, decimal, names, len(names) + trailing, second[2], second[1], notes, trailing)
+    return _with_units(TextLayout(path, delimiter, decimal, names, len(names) + trailing, second[2], second[1], notes,
+                                  trailing), second, third, decimal)
+
+
+def _numbers_only(cells: list[str], decimal: str) -> bool:
+    """Whether a line's non-empty cells are all numbers or clock readings (a data row)."""
+    return all(_is_number(c, decimal) or clock_readings.kind(c) for c in cells if c)
+
+
+def _commented_header(comments: list[tuple[str, int, int]], delimiter: str | None, n: int,
+                      decimal: str) -> list[str] | None:
+    """The column names on the preamble's last comment line, where it splits into the data's ``n``
+    fields of which none is a number; else None."""
+    if not comments:
+        return None
+    text = comments[-1][0].lstrip()[1:]
+    names = [c.strip().strip('"') for c in _split(text, delimiter)]
+    if len(names) != n or any(not c for c in names) or any(_is_number(c, decimal) for c in names) \
+            or len(set(names)) != n:
+        return None
+    return names
+
+
+def _with_units(layout: TextLayout, line: tuple[str, int, int] | None, after: tuple[str, int, int] | None,
+                decimal: str) -> TextLayout:
+    """``layout`` with a row of units under its header taken out of the data: ``line`` (the first line
+    after the header) holds no number, as many fields as the header, and numbers follow on ``after``."""
+    if line is None or after is None or layout.names is None:
+        return layout
+    cells = [c.strip() for c in _split(line[0], layout.delimiter)]
+    if layout.trailing and len(cells) == layout.n_fields and not cells[-1]:
+        cells = cells[:-1]
+    if len(cells) != len(layout.names) or not any(cells) or any(_is_number(c, decimal) or clock_readings.kind(c)
+                                                                for c in cells if c):
+        return layout
+    if not _numbers_only([c.strip() for c in _split(after[0], layout.delimiter)], decimal):
+        return layout
+    layout.units = [_unit_text(c) for c in cells]
+    layout.data_offset, layout.data_line = after[2], after[1]
+    layout.notes.append(f"line {line[1]} holds no number under the header ({', '.join(repr(c) for c in cells)}): "
+                        f"a row of units, read as the columns' units where --column gives none")
+    return layout
+
+
+def _unit_text(cell: str) -> str:
+    """A units row's cell without the brackets some loggers put around it: '[s]', '(bar)'."""
+    cell = cell.strip().strip('"')
+    if len(cell) > 2 and cell[0] + cell[-1] in ("[]", "()", "{}"):
+        cell = cell[1:-1].strip()
+    return cell
 
 
 def _detect_delimiter(line: str) -> str | None:
