@@ -46,7 +46,8 @@ def add_reading_options(p) -> None:
                    help="dataset column NAME (time, u_<joint>, q_<joint>, p_<joint>_a, p_<joint>_b) from the file "
                         "column SOURCE (header name or 0-based index) in UNIT: s, ms; V, mV; rad, deg (revolute) or m, "
                         "mm (prismatic); Pa, kPa, bar, MPa, psi; sensor_volts (the joint's sensor model A*v+B); "
-                        "*SCALE+OFFSET (raw counts). Default unit: SI. A time column of clock readings (2026-11-26 "
+                        "*SCALE+OFFSET (raw counts). Default unit: the file's (a Parquet file's metadata, a row of "
+                        "units under the header), else SI. A time column of clock readings (2026-11-26 "
                         "12:03:45.120, 12:03:45.120) is read as seconds from its first row. Repeatable; header "
                         "columns named like dataset columns are read as they are")
     g.add_argument("--no-header", action="store_true",
