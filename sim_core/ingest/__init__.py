@@ -6,6 +6,7 @@ a robot, converted to SI and checked (time grid, converter saturation, position 
     columns.py     --column NAME=SOURCE[:UNIT]; dataset columns of a robot
     units.py       units and their conversion to SI (incl. sensor volts, raw counts)
     timegrid.py    jitter, gaps, repeated timestamps, time going backwards
+    counter_wrap.py  a time column that is a wrapping tick counter (unwrapped)
     saturation.py  samples at a converter's full scale
     glitches.py    1-3 sample excursions of a position faster than the joint moves (repaired)
     missing.py     empty or NaN cells: refused, or runs of up to 3 filled (--missing repair)

@@ -16,6 +16,7 @@ import numpy as np
 from ..dataset import Dataset, DatasetError, check_command_range, check_time, read_dataset
 from . import joint_range, pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
+from .counter_wrap import unwrapped
 from .glitches import Glitches, find_glitches, repaired
 from .missing import MAX_RUN, Missing, filled, longest_run
 from .runs import runs
@@ -181,7 +182,10 @@ def import_record(path: str | Path | Sequence[str | Path], spec, options: ReadOp
         if source.clock and (units[k].scale != 1.0 or units[k].offset != 0.0):
             raise DatasetError(f"{where}column time ({labels[k]}) holds clock readings ({source.clock}), read in "
                                f"seconds: drop the unit {units[k].text!r} from --column {maps[k].text!r}")
-        t = units[k].convert(raw[:, k])
+        ticks, wraps = (raw[:, k], None) if source.clock else unwrapped(raw[:, k])
+        if wraps is not None:
+            notes.append(wraps.note(f"time ({labels[k]})", units[k].text if not units[k].counts else "ticks"))
+        t = units[k].convert(ticks)
         grid, keep = check_grid(t, where=where, label=f"time ({labels[k]})", place=place)
         t = t[keep] - t[keep][0]
     else:
