@@ -1,6 +1,6 @@
 """A log's layout around its header (sim_core/ingest/text.py): a preamble of comment lines, a header
-written as a comment (numpy's savetxt), and a row of units under the header (LabVIEW, DIAdem and
-spreadsheet exports). The logged values are written here, so the expected dataset comes from the
+written as a comment (numpy's savetxt), a row of units under the header (LabVIEW, DIAdem and
+spreadsheet exports), and the header again further down (a second run appended). The logged values are written here, so the expected dataset comes from the
 test, not from the reader."""
 
 import json
@@ -101,3 +101,14 @@ def test_a_file_of_comments_only_is_refused(cli, rig, tmp_path):
     proc = cli("import", tmp_path / "c.csv", "--robot", d / "rig", "--out", tmp_path / "c.out.csv", "--column",
                "time=0", "--column", "u_boom=1")
     assert proc.returncode == 2 and "nothing but comment lines (2" in proc.stderr
+
+
+def test_a_header_repeated_in_the_file_is_a_second_run_and_is_refused_where_it_starts(cli, rig, tmp_path):
+    d, spec, t, volts, cmd = rig
+    first, second = body(t[:200], volts[:200], cmd[:200]), body(t[:100], volts[:100], cmd[:100])
+    (tmp_path / "two.csv").write_text("time,pos,cmd\n" + first + "time,pos,cmd\n" + second)
+    proc = cli("import", tmp_path / "two.csv", "--robot", d / "rig", "--out", tmp_path / "two.out.csv", "--column",
+               "time=time", "--column", "q_boom=pos:sensor_volts", "--column", "u_boom=cmd")
+    assert proc.returncode == 2
+    assert "row 201 (line 202) repeats the header: a second run appended by the logger; split the file before " \
+           "line 202" in proc.stderr

@@ -400,6 +400,9 @@ def _slow(layout: TextLayout, indices: list[int], labels: list[str], cut_last_li
                 continue
             raise _error(f"{path}: row {row} (line {line}) has {len(cells)} values, {layout.first_row_label} has "
                          f"{layout.n_columns}")
+        if layout.names is not None and [c.strip().strip('"') for c in cells[:len(layout.names)]] == layout.names:
+            raise _error(f"{path}: row {row} (line {line}) repeats the header: a second run appended by the logger; "
+                         f"split the file before line {line} and read each run on its own (one as --validation)")
         for k, c in enumerate(indices):
             cell = cells[c]
             if missing and is_missing(cell) and (clock is None or k != clock[0]):     # not a clock reading's
