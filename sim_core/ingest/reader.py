@@ -19,9 +19,9 @@ from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .counter_wrap import unwrapped
 from .glitches import Glitches, find_glitches, repaired
 from .missing import MAX_RUN, Missing, filled, longest_run
-from .runs import runs
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
+from .runs import runs
 from .saturation import Saturation, find_saturation
 from .text import TextLayout, open_text, parse_delimiter, read_columns
 from .timegrid import TimeGrid, check_grid, regular_grid
