@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .runs import bridged, runs
+from .runs import bridged, rows_text
 
 MAX_RUN = 3        # samples in a row: more is a gap in the record, not a logger's missed read
 POLICIES = ("fail", "repair")
@@ -42,14 +42,7 @@ class Missing:
         return {"samples": self.samples, "runs": [list(r) for r in self.runs], "filled_by": self.filled_by}
 
     def rows_text(self, most: int = 8) -> str:
-        text = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in self.runs[:most])
-        return text + (", ..." if len(self.runs) > most else "")
-
-
-def longest_run(gone: np.ndarray) -> tuple[int, int] | None:
-    """The longest run of True in ``gone`` (0-based first, last), None if there is none."""
-    found = runs(gone)
-    return max(found, key=lambda r: r[1] - r[0]) if found else None
+        return rows_text(self.runs, most)
 
 
 def filled(y: np.ndarray, how: str) -> np.ndarray:
@@ -59,8 +52,8 @@ def filled(y: np.ndarray, how: str) -> np.ndarray:
     gone = np.isnan(y)
     k = np.arange(y.size)
     have = np.flatnonzero(~gone)
-    out = y.copy()
     if how == "hold":
+        out = y.copy()
         last = np.maximum.accumulate(np.where(gone, -1, k))
         out[gone] = np.where(last[gone] >= 0, y[np.maximum(last[gone], 0)], y[have[0]])
         return out

@@ -18,10 +18,10 @@ from . import joint_range, pressure_band
 from .columns import ColumnMap, column_kind, dataset_order, parse_column
 from .counter_wrap import unwrapped
 from .glitches import Glitches, find_glitches, repaired
-from .missing import MAX_RUN, Missing, filled, longest_run
+from .missing import MAX_RUN, Missing, filled
 from .options import ReadOptions
 from .parquet import ParquetTable, is_parquet
-from .runs import runs
+from .runs import rows_text, runs
 from .saturation import Saturation, find_saturation
 from .text import TextLayout, open_text, parse_delimiter, read_columns
 from .timegrid import TimeGrid, check_grid, regular_grid
@@ -259,7 +259,8 @@ def _fill_missing(raw: np.ndarray, maps: list[ColumnMap], labels: list[str], spe
         label = f"column {m.name} ({labels[i]})"
         if gone.all():
             raise DatasetError(f"{where}{label}: every sample is missing")
-        a, b = longest_run(gone)
+        found = runs(gone)
+        a, b = max(found, key=lambda r: r[1] - r[0])
         if b - a + 1 > MAX_RUN:
             raise DatasetError(f"{where}{label}: {place(a + 1)} to {place(b + 1)}: {b - a + 1} missing samples in a row; "
                                f"--missing repair fills runs of up to {MAX_RUN} (a logger's missed reads), not a gap in "
@@ -267,11 +268,11 @@ def _fill_missing(raw: np.ndarray, maps: list[ColumnMap], labels: list[str], spe
         kind = "time" if m.name == "time" else column_kind(m.name, spec)[0]
         how = "carry" if kind == "time" else "hold" if kind == "command" else "line"
         raw[:, i] = filled(raw[:, i], how)
-        found = Missing(int(gone.sum()), [(a + 1, b + 1) for a, b in runs(gone)],
-                        "the value before" if how == "hold" else "interpolation")
-        out[m.name] = found
-        notes.append(f"{label}: {found.samples} missing sample(s) in {len(found.runs)} run(s) (rows {found.rows_text()}): "
-                     f"filled by {found.filled_by}" + (" (a command is held between its samples)" if how == "hold" else "")
+        gap = Missing(int(gone.sum()), [(a + 1, b + 1) for a, b in found],
+                      "the value before" if how == "hold" else "interpolation")
+        out[m.name] = gap
+        notes.append(f"{label}: {gap.samples} missing sample(s) in {len(gap.runs)} run(s) (rows {gap.rows_text()}): "
+                     f"filled by {gap.filled_by}" + (" (a command is held between its samples)" if how == "hold" else "")
                      + " (--missing repair)")
     return out
 
@@ -338,7 +339,7 @@ def _glitch_check(raw: np.ndarray, policy: str, where: str, label: str, unit: Un
     g, mask = hit
     raw_unit = "V" if unit.sensor_range is not None else "counts" if unit.counts else unit.text
     size = f"{abs(g.largest * unit.scale):.4g} {unit.si}" + (f" ({g.largest:.4g} {raw_unit})" if raw_unit != unit.si else "")
-    rows = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in g.rows[:8]) + (", ..." if g.runs > 8 else "")
+    rows = rows_text(g.rows, 8, g.runs)
     what = f"{label}: {g.samples} sample(s) in {g.runs} glitch(es) of 1 to 3 samples (rows {rows}), up to {size} off " \
            f"the samples either side" + (f", {g.largest / g.fastest_step:.3g} x the largest step between clean neighbouring " 
                                          f"samples" if g.fastest_step > 0 else "")
@@ -352,10 +353,10 @@ def _glitch_check(raw: np.ndarray, policy: str, where: str, label: str, unit: Un
 
 
 def _saturation_note(m: ColumnMap, label: str, s: Saturation, u: Unit, kind: str) -> str:
-    runs = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in s.rows[:5]) + (", ..." if s.runs > 5 else "")
+    where = rows_text(s.rows, 5, s.runs)
     head = (f"{m.name} ({label}): {s.samples} sample(s) at the converter's full scale "
             f"({s.converter}: {s.full_scale[0]:g} / {s.full_scale[1]:g}), {s.runs} run(s), the longest "
-            f"{s.longest_run} sample(s) (rows {runs})")
+            f"{s.longest_run} sample(s) (rows {where})")
     if kind == "command":
         return head + "; kept: the valve saw the saturated command"
     return head + "; the true value there is unknown: kept in the dataset, marked invalid (masked) in the import report"
