@@ -12,8 +12,7 @@ diagnosed with the real commands.
   magnitude of seed k of N is drawn from the k-th of N strata of the effect's range (``RANGES``, in
   the actuator's own scales; a flow limit's share (the valve's or the pump's) on HydroLek is taken of
   the largest flow its open-loop record demands, 0.38-0.50 of the valve's full flow at the matrix's
-  seeds: ``DEMAND_SCALED``), so
-  the seeds cover the range, not its middle; HydroLek's excitation
+  seeds: ``DEMAND_SCALED``), so the seeds cover the range, not its middle; HydroLek's excitation
   cycles through PRBS (``hydrohil excite``), a multisine and operator-like doublets with holds; the
   rig's is closed-loop steps; the nominal model is off a few percent (valve flow, spool bandwidth,
   seal friction) and the angle noise is drawn in 0.2-1 mrad;
