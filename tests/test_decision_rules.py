@@ -889,6 +889,55 @@ def test_unexplained_when_one_channel_misses_by_far_though_the_score_comes_close
     assert not dc.unexplained_reasons(score=98.0, ceiling=98.5, angle_fits={"j2": 99.2}, residual_fails=True)
 
 
+def test_unexplained_when_a_position_channel_misses_by_far_with_a_white_residual():
+    """A disturbance on the measured position (interference whose increments are white): the velocity
+    channel far under its ceiling while the residual tests pass. The motion's own misfits leave a
+    coloured residual, so this is no effect left out: unexplained even with an effect named. The
+    chamber pressures are not the position sensor's: their gap with passing tests stays unjudged."""
+    ceilings = {"j2": {"angle": 99.5, "restarted": 99.5, "velocity": 90.0, "pressure": 99.0}}
+
+    def why(velocity, fails=False, pressure=98.9, **kw):
+        fits = {"j2": {"angle": 98.0, "restarted": 99.3, "velocity": velocity, "pressure": pressure}}
+        return dc.unexplained_reasons(score=float(np.mean(list(fits["j2"].values()))), ceiling=97.0,
+                                      angle_fits={"j2": 98.0}, residual_fails=fails, channel_fits=fits,
+                                      channel_ceilings=ceilings, **kw)
+
+    far = 90.0 - dc.FAR_POINTS - 1.0
+    r = why(far)
+    assert r and "velocity fit on j2" in r[0] and "residual tests pass" in r[0] and "measured position" in r[0]
+    assert why(far, named=True) and why(far, named=False)
+    # within FAR_POINTS of its ceiling: the white remainder is noise
+    assert not why(90.0 - dc.FAR_POINTS + 1.0)
+    # failing tests: the rule for a misfit of the motion speaks, not this one
+    r = why(far, fails=True)
+    assert r and "residual tests fail" in r[0] and "measured position" not in r[0]
+    # a chamber pressure far under its ceiling with passing (velocity) tests: not the position's rule
+    assert not why(89.0, pressure=99.0 - dc.FAR_POINTS - 5.0)
+    # the angle channel counts as the position's too
+    fits = {"j2": {"angle": 99.5 - dc.FAR_POINTS - 3.0, "velocity": 89.0}}
+    assert dc.unexplained_reasons(score=85.0, ceiling=95.0, angle_fits={"j2": fits["j2"]["angle"]},
+                                  residual_fails=False, channel_fits=fits, channel_ceilings=ceilings)
+
+
+def test_sensor_disturbance_is_said_only_with_a_white_velocity_residual():
+    from sim_core.identification import sensor_disturbance as sd
+
+    ceilings = {"a": {"angle": 99.5, "velocity": 90.0}, "b": {"angle": 99.5, "velocity": 90.0}}
+    fits = {"a": {"angle": 98.0, "velocity": 90.0 - dc.FAR_POINTS - 4.0}, "b": {"angle": 99.4, "velocity": 89.0}}
+    white = {"a": {"ljung_box_p": sd.P_WHITE * 20}, "b": {"ljung_box_p": 0.9}}
+    got = sd.found(fits, ceilings, white)
+    assert list(got) == ["a"] and got["a"]["channels"] == [("velocity", fits["a"]["velocity"], 90.0)]
+    text = sd.cause("a", got["a"])
+    assert "position of a" in text and f"{dc.FAR_POINTS + 4.0:.1f} points below" in text
+    # a coloured velocity residual is the motion's misfit: no sensor cause
+    assert not sd.found(fits, ceilings, {"a": {"ljung_box_p": sd.P_WHITE / 2}})
+    # no residual tests (a diverged model): nothing said
+    assert not sd.found(fits, ceilings, {})
+    # a far pressure channel is not the position sensor's
+    assert not sd.found({"a": {"angle": 99.4, "velocity": 89.5, "pressure": 50.0}},
+                        {"a": {"angle": 99.5, "velocity": 90.0, "pressure": 99.0}}, white)
+
+
 def test_a_named_cause_must_close_most_of_a_pressure_misfit():
     """A Coulomb friction standing for a Stribeck curve fits the angle and closes only part of the
     chamber-pressure misfit, which the (velocity) residual tests do not see: the closest effect, not

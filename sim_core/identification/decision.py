@@ -36,8 +36,9 @@ The rules, in the order they apply:
 * ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
   the choice ambiguous, with the measurement that would decide (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
-  (extended or not) still misses the record by far (an angle fit below zero, or more than 10 points
-  under the noise ceiling with failing residual tests), or when the named effects leave a chamber
+  (extended or not) still misses the record by far (an angle fit below zero, more than 10 points
+  under the noise ceiling with failing residual tests, or a channel of the position more than 10
+  points under its ceiling with a white residual), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
   misfit on it, or when nothing is named while the score sits more than 2 points under the ceiling
   with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when effects
@@ -62,6 +63,7 @@ AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: a
 MAX_EFFECTS = 3
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
+POSITION_CHANNELS = ("angle", "restarted", "velocity")   # the channels a position sensor's record gives
 EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
 EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
 EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
@@ -430,13 +432,15 @@ def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_cei
     reported as not explaining the record (:func:`unexplained_reasons`' rules on the fits alone: an
     angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
     while the residual tests fail; with ``base_fits``, the baseline's fits, also a chamber pressure
-    whose misfit the model's effects leave mostly open)."""
+    whose misfit the model's effects leave mostly open). A position channel far off with a white
+    residual is not counted: that is a disturbance on the measured signal, which no other path of
+    effects explains either."""
     joints = list(fits)
     return bool(unexplained_reasons(
         angle_fits={j: fits[j]["angle"] for j in joints}, score=mean_score(fits), ceiling=ceiling,
         residual_fails=residual_fails,
         channel_fits={j: {c: v for c, v in fits[j].items() if c != "score"} for j in joints},
-        channel_ceilings=channel_ceilings, base_channel_fits=base_fits))
+        channel_ceilings=channel_ceilings, base_channel_fits=base_fits, disturbance=False))
 
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
@@ -731,7 +735,7 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
                         base_score: float | None = None, channel_fits: dict[str, dict[str, float]] | None = None,
                         channel_ceilings: dict[str, dict[str, float]] | None = None,
                         base_channel_fits: dict[str, dict[str, float]] | None = None,
-                        named: bool | None = None) -> list[str]:
+                        named: bool | None = None, disturbance: bool = True) -> list[str]:
     """Why the final model (the extended one, or the baseline when nothing is named) does not
     explain the record; empty when it does.
 
@@ -745,6 +749,12 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
       FAR_POINTS below its own noise ceiling (``channel_ceilings``) while the residual tests fail:
       a cause that fits the angle and leaves the chamber pressures as wrong as before has not
       explained the record, even when the mean over channels comes close;
+    * one channel of the position (angle, restarted, velocity) more than FAR_POINTS below its noise
+      ceiling while the residual tests pass: the joint's motion, driven by the command through its
+      inertia, leaves a coloured residual where the model misses it; one that large and white is a
+      disturbance on the measured signal (:mod:`.sensor_disturbance`), which the noise ceiling (white
+      noise on the position) does not allow for and no effect explains (``disturbance`` False: not
+      judged);
     * named effects (``base_channel_fits``: the baseline's channel fits, given when effects are
       named) that leave a chamber pressure more than THRESHOLD_POINTS below its noise ceiling
       after closing less than EXPLAINED_SHARE of the baseline's distance on it. The residual tests
@@ -768,12 +778,15 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
                      f"baseline's distance")
         why.append(text)
     elif residual_fails and channel_fits and channel_ceilings:
-        far = [(j, ch, f, channel_ceilings[j][ch]) for j, fits in channel_fits.items() for ch, f in fits.items()
-               if ch in channel_ceilings.get(j, {}) and not channel_ceilings[j][ch] - f <= FAR_POINTS]
+        far = far_channels(channel_fits, channel_ceilings)
         if far:
-            why.append("the model's " + ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise "
-                                                   f"ceiling {c:.1f}" for j, ch, f, c in far)
-                       + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+            why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+    elif disturbance and not residual_fails and channel_fits and channel_ceilings:
+        far = far_channels(channel_fits, channel_ceilings, POSITION_CHANNELS)
+        if far:
+            why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) while its residual tests "
+                       "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
+                       "joint the model leaves out, but something on the measured position")
     if not why and named is False and gap > THRESHOLD_POINTS and residual_fails:
         why.append(f"nothing in the bank explains the misfit the residual tests show: the model's score {score:.1f} "
                    f"is {gap:.1f} points below its noise ceiling {ceiling:.1f}, more than the {THRESHOLD_POINTS:g} "
@@ -793,6 +806,20 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
                            f"{left:.1f} points below its noise ceiling {c:.1f}); a cause must close "
                            f"{100 * EXPLAINED_SHARE:.0f} % of a misfit the residual tests do not see")
     return why
+
+
+def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
+                 channels: tuple[str, ...] | None = None) -> list[tuple[str, str, float, float]]:
+    """(joint, channel, fit, ceiling) of every channel (of ``channels``, or any) more than FAR_POINTS
+    below its noise ceiling; a fit that is not a number counts as far."""
+    return [(j, ch, f, channel_ceilings[j][ch]) for j, fits in channel_fits.items() for ch, f in fits.items()
+            if (channels is None or ch in channels) and ch in channel_ceilings.get(j, {})
+            and not channel_ceilings[j][ch] - f <= FAR_POINTS]
+
+
+def _far_text(far: list[tuple[str, str, float, float]]) -> str:
+    return ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f}"
+                     for j, ch, f, c in far)
 
 
 def verdict(named: bool, unexplained: bool) -> str:

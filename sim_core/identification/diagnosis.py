@@ -29,7 +29,7 @@ from ..dataset import column_unit
 from ..ingest import pressure_band
 from . import output_error as oe
 from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, outside_range,
-               polarity)
+               polarity, sensor_disturbance)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .beyond_range import BeyondRange, stopped_at_an_end
@@ -666,21 +666,28 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
     to check (``record_causes``)."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
+    channel_fits = {j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints}
     why = unexplained_reasons(score=score, ceiling=ceiling, angle_fits={j: ext_fits[j]["angle"] for j in joints},
                               residual_fails=any(residual_fails(ext_tests.get(j, {})) for j in joints),
-                              base_score=_score(base_fits, joints),
-                              channel_fits={j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints},
+                              base_score=_score(base_fits, joints), channel_fits=channel_fits,
                               channel_ceilings=ceilings,
                               base_channel_fits=base_fits if selected else None, named=bool(selected))
     if not why:
         return {}
-    return {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
-            "channel_ceilings": {j: {c: round(v, 3) for c, v in ch.items()} for j, ch in ceilings.items()},
-            "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
-            "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
-                        for s in selected],
-            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits, ceilings),
-            "record_causes": [HELD_REPLAY] if closed_loop else []}
+    disturbed = sensor_disturbance.found(channel_fits, ceilings, ext_tests)
+    causes = [sensor_disturbance.cause(j, f) for j, f in disturbed.items()]
+    out = {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
+           "channel_ceilings": {j: {c: round(v, 3) for c, v in ch.items()} for j, ch in ceilings.items()},
+           "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
+           "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
+                       for s in selected],
+           "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits, ceilings),
+           "record_causes": causes + ([HELD_REPLAY] if closed_loop else [])}
+    if disturbed:
+        out["sensor_disturbance"] = {j: {"channels": [{"channel": ch, "fit": round(f, 2), "ceiling": round(c, 2)}
+                                                      for ch, f, c in d["channels"]],
+                                         "ljung_box_p": round(d["ljung_box_p"], 4)} for j, d in disturbed.items()}
+    return out
 
 
 def _pct(v: float):
