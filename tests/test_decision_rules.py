@@ -924,13 +924,18 @@ def test_sensor_disturbance_is_said_only_with_a_white_velocity_residual():
 
     ceilings = {"a": {"angle": 99.5, "velocity": 90.0}, "b": {"angle": 99.5, "velocity": 90.0}}
     fits = {"a": {"angle": 98.0, "velocity": 90.0 - dc.FAR_POINTS - 4.0}, "b": {"angle": 99.4, "velocity": 89.0}}
-    white = {"a": {"ljung_box_p": sd.P_WHITE * 20}, "b": {"ljung_box_p": 0.9}}
+    rho = [0.5 * sd.WHITE_RHO, -0.9 * sd.WHITE_RHO] + [0.01] * 18       # lags 1-20 of the decimated residual
+    white = {"a": {"autocorrelation": rho}, "b": {"autocorrelation": rho}}
     got = sd.found(fits, ceilings, white)
     assert list(got) == ["a"] and got["a"]["channels"] == [("velocity", fits["a"]["velocity"], 90.0)]
+    assert got["a"]["largest_autocorrelation"] == 0.9 * sd.WHITE_RHO
     text = sd.cause("a", got["a"])
     assert "position of a" in text and f"{dc.FAR_POINTS + 4.0:.1f} points below" in text
-    # a coloured velocity residual is the motion's misfit: no sensor cause
-    assert not sd.found(fits, ceilings, {"a": {"ljung_box_p": sd.P_WHITE / 2}})
+    # a coloured velocity residual (an 8 Hz mode: -0.74 at lag 1; a late command: +0.85) is the motion's misfit
+    for lag1 in (-0.74, 0.85, 1.1 * sd.WHITE_RHO):
+        assert not sd.found(fits, ceilings, {"a": {"autocorrelation": [lag1] + rho[1:]}})
+    # coloured at a later lag only (a slow oscillation aliased by the decimation)
+    assert not sd.found(fits, ceilings, {"a": {"autocorrelation": rho[:10] + [0.6] + rho[11:]}})
     # no residual tests (a diverged model): nothing said
     assert not sd.found(fits, ceilings, {})
     # a far pressure channel is not the position sensor's

@@ -41,7 +41,7 @@ from .parameters import FreeParameter, free_parameter
 from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
-from .residual_tests import independence, ljung_box, spectrum, transfer_estimate
+from .residual_tests import autocorrelation, independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         free_list, select, without)
 from .signatures import joint_signatures, public
@@ -686,7 +686,8 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
     if disturbed:
         out["sensor_disturbance"] = {j: {"channels": [{"channel": ch, "fit": round(f, 2), "ceiling": round(c, 2)}
                                                       for ch, f, c in d["channels"]],
-                                         "ljung_box_p": round(d["ljung_box_p"], 4)} for j, d in disturbed.items()}
+                                         "largest_autocorrelation": round(d["largest_autocorrelation"], 3)}
+                                     for j, d in disturbed.items()}
     return out
 
 
@@ -758,10 +759,11 @@ def residual_tests(rec: Record, prob: oe.Problem, out: Outputs, start: int) -> d
         rw = w - wh
         dec = max(1, int(round(0.075 * rec.rate)))
         q, p = ljung_box(rw[::dec], lags=20)
+        rho = autocorrelation(rw[::dec], 20)[1:]          # the same decimated residual, lags 1-20
         ind = independence(rw, rec.u(j)[start: prob.n], wh, rec.rate)
         f, pxx = spectrum(rw, rec.rate)
         H = transfer_estimate(wh, w, rec.rate) if np.ptp(wh) > 0 else None
-        res[j] = {"ljung_box_Q": q, "ljung_box_p": p,
+        res[j] = {"ljung_box_Q": q, "ljung_box_p": p, "autocorrelation": rho.tolist(),
                   "independence": {k: {kk: vv for kk, vv in v.items() if kk not in ("lags_s", "r")} for k, v in ind.items()},
                   "angle_rms": float(np.sqrt(np.mean((y - yh) ** 2))),
                   "_independence": ind, "_spectrum": (f, pxx), "_etfe": H}
