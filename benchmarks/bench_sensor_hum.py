@@ -3,9 +3,10 @@
 random walk at the log's rate); no model of the rig reproduces either
 (``sim_core/identification/sensor_disturbance.py``).
 
-Each case: ``rig new boom`` -> the tests' closed-loop generator (``tests/rig_records.py``, the rig's
-valve flow x1.1 and supply x0.9 against its spec, start off, jittered timestamps) -> ``a sin(2 pi f t)``
-volts added to the logged sensor volts -> ``hydrohil diagnose`` with the import options. The
+Each case: ``rig new TEMPLATE`` (boom by default) -> the tests' closed-loop generator
+(``tests/rig_records.py``, the rig's valve flow x1.1 and supply x0.9 against its spec, start off,
+jittered timestamps) -> ``a sin(2 pi f t)`` volts added to the logged sensor volts -> ``hydrohil
+diagnose`` with the import options. The
 reference in the same run is the clean log (a = 0), which must read ``no_significant_discrepancy``.
 Printed per case: the verdict, what was named (and whether marked ambiguous), whether the report's
 first record cause is the disturbance on the sensor, the baseline's angle fit against its noise
@@ -14,7 +15,7 @@ ceiling, and how far the final model's velocity sits under its ceiling. A hum sh
 its ceiling with a white residual, the sensor is the cause said first.
 
     .venv/bin/python benchmarks/bench_sensor_hum.py [--seeds 3,4,5] [--amplitudes 0,0.005,0.01,0.02]
-        [--hum-hz 49.93]
+        [--hum-hz 49.93] [--template boom|cylinder|rotary]
 
 About 30 s per case on this 2-core VM.
 """
@@ -33,8 +34,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
-READ = ["--no-header", "--column", "time=0", "--column", "q_boom=1:sensor_volts", "--column", "u_boom=2"]
-
+from sim_core.model.spec import load_robot  # noqa: E402
 
 def cli(*args) -> None:
     p = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT)
@@ -47,27 +47,30 @@ def main() -> int:
     ap.add_argument("--seeds", default="3,4,5")
     ap.add_argument("--amplitudes", default="0,0.005,0.01,0.02", help="hum amplitudes, V at the sensor")
     ap.add_argument("--hum-hz", type=float, default=49.93)
+    ap.add_argument("--template", default="boom", help="the rig: a `hydrohil rig new` template")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench_hum_"))
-    cli("rig", "new", "boom", "--out", work / "rig")
+    cli("rig", "new", args.template, "--out", work / "rig")
+    joint = load_robot(work / "rig").joint_names[0]
+    read = ["--no-header", "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2"]
     named_wrong = clean_wrong = cases = unexplained = said = hummed = 0
     for seed in map(int, args.seeds.split(",")):
         rows, _ = closed_loop_record(work / "rig", hidden=None, seed=seed, start_offset=0.03,
-                                     off={"joints.boom.valve.rated_flow": 1.1, "supply.pressure": 0.9})
+                                     off={f"joints.{joint}.valve.rated_flow": 1.1, "supply.pressure": 0.9})
         for amp in map(float, args.amplitudes.split(",")):
             log = rows.copy()
             log[:, 1] += amp * np.sin(2 * np.pi * args.hum_hz * log[:, 0] + 0.3)
             write_headerless(log, work / "log.csv")
-            cli("diagnose", "--robot", work / "rig", work / "log.csv", *READ, "--report", work / "rep", "--quiet")
+            cli("diagnose", "--robot", work / "rig", work / "log.csv", *read, "--report", work / "rep", "--quiet")
             d = json.loads((work / "rep" / "diagnosis.json").read_text())
             named = ", ".join(s["effect"] + (" (ambiguous)" if s.get("ambiguous") else "") for s in d["selected"])
-            fits, ceil = d["extended"]["channels"]["boom"], d["decision"]["channel_ceilings"]["boom"]
+            fits, ceil = d["extended"]["channels"][joint], d["decision"]["channel_ceilings"][joint]
             causes = (d.get("unexplained") or {}).get("record_causes") or [""]
-            sensor = "boom" in (d.get("unexplained") or {}).get("sensor_disturbance", {})
-            first = "sensor" if sensor and causes[0].startswith("the position of boom") else "-"
+            sensor = joint in (d.get("unexplained") or {}).get("sensor_disturbance", {})
+            first = "sensor" if sensor and causes[0].startswith(f"the position of {joint}") else "-"
             print(f"seed {seed} hum {1e3 * amp:5.1f} mV  {d['verdict']:27s} {named or '-':28s} first cause "
                   f"{first:6s} baseline angle "
-                  f"{d['baseline']['fit']['boom']:6.2f} (ceiling {d['data']['fit_ceiling']['boom']:.2f}), velocity "
+                  f"{d['baseline']['fit'][joint]:6.2f} (ceiling {d['data']['fit_ceiling'][joint]:.2f}), velocity "
                   f"{ceil['velocity'] - fits['velocity']:5.1f} points under its ceiling", flush=True)
             cases += 1
             if amp == 0.0:

@@ -913,10 +913,12 @@ def test_unexplained_when_a_position_channel_misses_by_far_with_a_white_residual
     assert r and "residual tests fail" in r[0] and "measured position" not in r[0]
     # a chamber pressure far under its ceiling with passing (velocity) tests: not the position's rule
     assert not why(89.0, pressure=99.0 - dc.FAR_POINTS - 5.0)
-    # the angle channel counts as the position's too
+    # the angle alone far off with a white velocity residual (a level the calibration left) is not this rule's
     fits = {"j2": {"angle": 99.5 - dc.FAR_POINTS - 3.0, "velocity": 89.0}}
-    assert dc.unexplained_reasons(score=85.0, ceiling=95.0, angle_fits={"j2": fits["j2"]["angle"]},
-                                  residual_fails=False, channel_fits=fits, channel_ceilings=ceilings)
+    assert not dc.unexplained_reasons(score=91.0, ceiling=95.0, angle_fits={"j2": fits["j2"]["angle"]},
+                                      residual_fails=False, channel_fits=fits, channel_ceilings=ceilings)
+    # the search's own check (misses_record) leaves it out: no other path of effects explains it
+    assert not dc.misses_record({"j2": {"angle": 98.0, "velocity": far, "score": 90.0}}, 97.0, ceilings, False)
 
 
 def test_sensor_disturbance_is_said_only_with_a_white_velocity_residual():
@@ -938,9 +940,10 @@ def test_sensor_disturbance_is_said_only_with_a_white_velocity_residual():
     assert not sd.found(fits, ceilings, {"a": {"autocorrelation": rho[:10] + [0.6] + rho[11:]}})
     # no residual tests (a diverged model): nothing said
     assert not sd.found(fits, ceilings, {})
-    # a far pressure channel is not the position sensor's
+    # a far pressure channel is not the position sensor's, nor a far angle over a velocity that fits (a level)
     assert not sd.found({"a": {"angle": 99.4, "velocity": 89.5, "pressure": 50.0}},
                         {"a": {"angle": 99.5, "velocity": 90.0, "pressure": 99.0}}, white)
+    assert not sd.found({"a": {"angle": 70.0, "velocity": 89.5}}, ceilings, white)
 
 
 def test_a_named_cause_must_close_most_of_a_pressure_misfit():

@@ -37,8 +37,8 @@ The rules, in the order they apply:
   the choice ambiguous, with the measurement that would decide (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
   (extended or not) still misses the record by far (an angle fit below zero, more than 10 points
-  under the noise ceiling with failing residual tests, or a channel of the position more than 10
-  points under its ceiling with a white residual), or when the named effects leave a chamber
+  under the noise ceiling with failing residual tests, or the velocity more than 10 points under
+  its ceiling with a white residual), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
   misfit on it, or when nothing is named while the score sits more than 2 points under the ceiling
   with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when effects
@@ -63,7 +63,7 @@ AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: a
 MAX_EFFECTS = 3
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
-POSITION_CHANNELS = ("angle", "restarted", "velocity")   # the channels a position sensor's record gives
+WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
 EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
 EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
 EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
@@ -432,7 +432,7 @@ def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_cei
     reported as not explaining the record (:func:`unexplained_reasons`' rules on the fits alone: an
     angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
     while the residual tests fail; with ``base_fits``, the baseline's fits, also a chamber pressure
-    whose misfit the model's effects leave mostly open). A position channel far off with a white
+    whose misfit the model's effects leave mostly open). The velocity far off with a white
     residual is not counted: that is a disturbance on the measured signal, which no other path of
     effects explains either."""
     joints = list(fits)
@@ -749,12 +749,12 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
       FAR_POINTS below its own noise ceiling (``channel_ceilings``) while the residual tests fail:
       a cause that fits the angle and leaves the chamber pressures as wrong as before has not
       explained the record, even when the mean over channels comes close;
-    * one channel of the position (angle, restarted, velocity) more than FAR_POINTS below its noise
-      ceiling while the residual tests pass: the joint's motion, driven by the command through its
-      inertia, leaves a coloured residual where the model misses it; one that large and white is a
-      disturbance on the measured signal (:mod:`.sensor_disturbance`), which the noise ceiling (white
-      noise on the position) does not allow for and no effect explains (``disturbance`` False: not
-      judged);
+    * the velocity channel more than FAR_POINTS below its noise ceiling while the residual tests
+      pass: the joint's motion, driven by the command through its inertia, leaves a coloured
+      residual where the model misses it; one that large and white is a disturbance on the measured
+      position (:mod:`.sensor_disturbance`), which the noise ceiling (white noise on the position)
+      does not allow for and no effect explains (``disturbance`` False: not judged). An angle far
+      off with a white velocity residual (a level or drift the calibration left) is not this;
     * named effects (``base_channel_fits``: the baseline's channel fits, given when effects are
       named) that leave a chamber pressure more than THRESHOLD_POINTS below its noise ceiling
       after closing less than EXPLAINED_SHARE of the baseline's distance on it. The residual tests
@@ -782,7 +782,7 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
         if far:
             why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) and its residual tests fail")
     elif disturbance and not residual_fails and channel_fits and channel_ceilings:
-        far = far_channels(channel_fits, channel_ceilings, POSITION_CHANNELS)
+        far = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
         if far:
             why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "

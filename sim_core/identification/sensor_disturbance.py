@@ -10,9 +10,8 @@ few points of angle each, about as much as one another, and one of them would be
 A misfit of the joint's motion (an effect the model leaves out, a parameter off) comes through the
 joint's inertia and the command: its velocity residual is coloured over the motion's time scale
 (at the residual tests' 75 ms decimation, an 8 Hz mode the model lacks correlates -0.74 from one
-sample to the next, a command logged ten times slower than its controller +0.85). So a channel of
-the position more than FAR_POINTS below its noise ceiling while the velocity residual is white is
-said as a cause in the record, ahead of the others, and decision.unexplained_reasons keeps any
+sample to the next, a command logged ten times slower than its controller +0.85). So the velocity
+channel more than FAR_POINTS below its noise ceiling while its residual is white is said as a cause in the record, ahead of the others, and decision.unexplained_reasons keeps any
 effect from being named on it. White here is a size, not a test: no autocorrelation of the
 decimated velocity residual beyond WHITE_RHO over its first 20 lags, so at most about that share
 of it is coloured. The Ljung-Box test finds a coloured share of a few percent in a 60 s record (the
@@ -26,19 +25,19 @@ import math
 
 import numpy as np
 
-from .decision import FAR_POINTS, POSITION_CHANNELS, far_channels
+from .decision import FAR_POINTS, WHITE_MISS_CHANNELS, far_channels
 
 WHITE_RHO = 0.3   # largest |autocorrelation| (lags 1-20, decimated) of a velocity residual that counts as white
 
 
 def found(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
           tests: dict[str, dict]) -> dict[str, dict]:
-    """Per joint whose position channels (``channel_fits``, percent, against ``channel_ceilings``)
-    sit more than FAR_POINTS below their noise ceilings while its velocity residual is white
+    """Per joint whose velocity channel (``channel_fits``, percent, against ``channel_ceilings``)
+    sits more than FAR_POINTS below its noise ceiling while its residual is white
     (``tests``: diagnosis.residual_tests of the same model, with its ``autocorrelation``):
     {'channels': [(channel, fit, ceiling)], 'largest_autocorrelation'}."""
     out: dict[str, dict] = {}
-    for j, ch, f, c in far_channels(channel_fits, channel_ceilings, POSITION_CHANNELS):
+    for j, ch, f, c in far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS):
         rho = np.asarray(tests.get(j, {}).get("autocorrelation", []), dtype=float)
         largest = float(np.max(np.abs(rho))) if rho.size else math.inf
         if not largest <= WHITE_RHO:
