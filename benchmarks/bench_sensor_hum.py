@@ -15,7 +15,7 @@ ceiling, and how far the final model's velocity sits under its ceiling. A hum sh
 its ceiling with a white residual, the sensor is the cause said first.
 
     .venv/bin/python benchmarks/bench_sensor_hum.py [--seeds 3,4,5] [--amplitudes 0,0.005,0.01,0.02]
-        [--hum-hz 49.93] [--template boom|cylinder|rotary]
+        [--hum-hz 49.93] [--template boom|cylinder|rotary] [--steady-clock]
 
 About 30 s per case on this 2-core VM.
 """
@@ -48,6 +48,9 @@ def main() -> int:
     ap.add_argument("--amplitudes", default="0,0.005,0.01,0.02", help="hum amplitudes, V at the sensor")
     ap.add_argument("--hum-hz", type=float, default=49.93)
     ap.add_argument("--template", default="boom", help="the rig: a `hydrohil rig new` template")
+    ap.add_argument("--steady-clock", action="store_true",
+                    help="sample the hum at the nominal instants k / 50 Hz (a logger whose clock does not wander: "
+                         "a clean slow alias), not at the logged, jittered times")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench_hum_"))
     cli("rig", "new", args.template, "--out", work / "rig")
@@ -59,7 +62,8 @@ def main() -> int:
                                      off={f"joints.{joint}.valve.rated_flow": 1.1, "supply.pressure": 0.9})
         for amp in map(float, args.amplitudes.split(",")):
             log = rows.copy()
-            log[:, 1] += amp * np.sin(2 * np.pi * args.hum_hz * log[:, 0] + 0.3)
+            at = np.arange(len(log)) / 50.0 if args.steady_clock else log[:, 0]
+            log[:, 1] += amp * np.sin(2 * np.pi * args.hum_hz * at + 0.3)
             write_headerless(log, work / "log.csv")
             cli("diagnose", "--robot", work / "rig", work / "log.csv", *read, "--report", work / "rep", "--quiet")
             d = json.loads((work / "rep" / "diagnosis.json").read_text())
