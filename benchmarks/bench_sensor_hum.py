@@ -36,6 +36,9 @@ from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.model.spec import load_robot  # noqa: E402
 
+RATE_HZ = 50.0   # the logger's rate (closed_loop_record's)
+
+
 def cli(*args) -> None:
     p = subprocess.run([sys.executable, "-m", "sim_core.cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT)
     if p.returncode:
@@ -49,7 +52,7 @@ def main() -> int:
     ap.add_argument("--hum-hz", type=float, default=49.93)
     ap.add_argument("--template", default="boom", help="the rig: a `hydrohil rig new` template")
     ap.add_argument("--steady-clock", action="store_true",
-                    help="sample the hum at the nominal instants k / 50 Hz (a logger whose clock does not wander: "
+                    help="sample the hum at the nominal instants k / RATE_HZ (a logger whose clock does not wander: "
                          "a clean slow alias), not at the logged, jittered times")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench_hum_"))
@@ -58,11 +61,11 @@ def main() -> int:
     read = ["--no-header", "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2"]
     named_wrong = clean_wrong = cases = unexplained = said = hummed = 0
     for seed in map(int, args.seeds.split(",")):
-        rows, _ = closed_loop_record(work / "rig", hidden=None, seed=seed, start_offset=0.03,
+        rows, _ = closed_loop_record(work / "rig", hidden=None, seed=seed, start_offset=0.03, rate=RATE_HZ,
                                      off={f"joints.{joint}.valve.rated_flow": 1.1, "supply.pressure": 0.9})
         for amp in map(float, args.amplitudes.split(",")):
             log = rows.copy()
-            at = np.arange(len(log)) / 50.0 if args.steady_clock else log[:, 0]
+            at = np.arange(len(log)) / RATE_HZ if args.steady_clock else log[:, 0]
             log[:, 1] += amp * np.sin(2 * np.pi * args.hum_hz * at + 0.3)
             write_headerless(log, work / "log.csv")
             cli("diagnose", "--robot", work / "rig", work / "log.csv", *read, "--report", work / "rep", "--quiet")
