@@ -39,7 +39,8 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
                        duration: float = 60.0, rate: float = 50.0, kp: float | None = None,
                        start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1,
                        extra: tuple[tuple[str, dict], ...] = (), ti: float | None = None,
-                       reference_range: tuple[float, float] | None = None, reference=reference_steps):
+                       reference_range: tuple[float, float] | None = None, reference=reference_steps,
+                       interference=None):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
@@ -50,7 +51,9 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     name (a Stribeck friction: real seals); ``ti``: integral time (s) of a PI controller (integral
     gain kp / ti), its integral frozen while the command saturates (anti-windup); None: P only.
     ``reference_range``: (low, high) of the set points (default: the middle 60 % of the range);
-    ``reference``: how the set point moves in it (``reference_steps`` or ``sine_reference``)."""
+    ``reference``: how the set point moves in it (``reference_steps`` or ``sine_reference``);
+    ``interference``: volts the sensor's wiring adds at time t (s) (mains hum), read by the controller
+    and logged alike."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
@@ -76,7 +79,7 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     t, integral = 0.0, 0.0
     y = sim.sample()[0]
     while t < duration:
-        volts = float(y[L.YA_SENS_V])
+        volts = float(y[L.YA_SENS_V]) + (interference(t) if interference is not None else 0.0)
         pos = A * volts + B                      # the rig's controller reads its own sensor
         e = ref(t) - pos
         raw = kp * e + ki * integral

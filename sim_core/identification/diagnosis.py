@@ -28,8 +28,8 @@ import numpy as np
 from ..dataset import column_unit
 from ..ingest import pressure_band
 from . import output_error as oe
-from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, outside_range,
-               polarity, sensor_disturbance)
+from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
+               outside_range, polarity, sensor_disturbance)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .beyond_range import BeyondRange, stopped_at_an_end
@@ -675,7 +675,9 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
     if not why:
         return {}
     disturbed = sensor_disturbance.found(channel_fits, ceilings, ext_tests)
-    causes = [sensor_disturbance.cause(j, f) for j, f in disturbed.items()]
+    mains = mains_tone.found(ext_tests, vrec.time[split: vprob.n], vrec.rate)
+    causes = ([sensor_disturbance.cause(j, f) for j, f in disturbed.items()]
+              + [mains_tone.cause(j, f) for j, f in mains.items()])
     out = {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
            "channel_ceilings": {j: {c: round(v, 3) for c, v in ch.items()} for j, ch in ceilings.items()},
            "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
@@ -688,6 +690,13 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                                                       for ch, f, c in d["channels"]],
                                          "largest_autocorrelation": round(d["largest_autocorrelation"], 3)}
                                      for j, d in disturbed.items()}
+    if mains:
+        out["mains_tone"] = {j: {"frequency_hz": m["peak_hz"], "mains_hz": m["mains_hz"], "harmonic": m["harmonic"],
+                                 "alias_hz": m["alias_hz"], "band_hz": list(m["band_hz"]),
+                                 "share": round(m["share"], 3), "contrast": round(m["contrast"], 1),
+                                 "steadiness_cv": round(m["steadiness_cv"], 3),
+                                 "model_motion_ratio": round(m["model_motion_ratio"], 3)}
+                             for j, m in mains.items()}
     return out
 
 
@@ -766,5 +775,6 @@ def residual_tests(rec: Record, prob: oe.Problem, out: Outputs, start: int) -> d
         res[j] = {"ljung_box_Q": q, "ljung_box_p": p, "autocorrelation": rho.tolist(),
                   "independence": {k: {kk: vv for kk, vv in v.items() if kk not in ("lags_s", "r")} for k, v in ind.items()},
                   "angle_rms": float(np.sqrt(np.mean((y - yh) ** 2))),
-                  "_independence": ind, "_spectrum": (f, pxx), "_etfe": H}
+                  "_independence": ind, "_spectrum": (f, pxx), "_etfe": H,
+                  "_velocity_residual": rw, "_velocity_simulated": wh}
     return res
