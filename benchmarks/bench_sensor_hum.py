@@ -8,8 +8,9 @@ Each case: ``rig new TEMPLATE`` (boom by default) -> the tests' closed-loop gene
 jittered timestamps) -> ``a sin(2 pi f t)`` volts added to the logged sensor volts -> ``hydrohil
 diagnose`` with the import options. The
 reference in the same run is the clean log (a = 0), which must read ``no_significant_discrepancy``.
-With ``--fed-back`` the hum is on the sensor the controller reads too: the controller runs at 1 kHz
-and the logger keeps every 20th sample. Printed per case: the verdict, what was named (and whether
+With ``--fed-back`` the hum is on the sensor the controller reads too (a controller that logs each of
+its cycles): the command carries the hum's alias and the joint moves with it, in the record and in
+the model alike. Printed per case: the verdict, what was named (and whether
 marked ambiguous), which of the sensor's causes the report says first (``sensor``: a white
 disturbance; ``mains``: a steady line where mains aliases, with its frequency), the baseline's angle
 fit against its noise ceiling, and how far the final model's velocity sits under its ceiling. A hum
@@ -58,7 +59,7 @@ def main() -> int:
                     help="sample the hum at the nominal instants k / RATE_HZ (a logger whose clock does not wander: "
                          "a clean slow alias), not at the logged, jittered times")
     ap.add_argument("--fed-back", action="store_true",
-                    help="the hum on the sensor the controller reads too (a 1 kHz loop, every 20th sample logged)")
+                    help="the hum on the sensor the controller reads too (the loop logs each of its cycles)")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench_hum_"))
     cli("rig", "new", args.template, "--out", work / "rig")
@@ -72,8 +73,7 @@ def main() -> int:
         for amp in map(float, args.amplitudes.split(",")):
             if args.fed_back:
                 log, _ = closed_loop_record(work / "rig", hidden=None, seed=seed, start_offset=0.03, rate=RATE_HZ,
-                                            off=off, log_every=20,
-                                            interference=lambda t: amp * np.sin(2 * np.pi * args.hum_hz * t + 0.3))
+                                            off=off, interference=lambda t: amp * np.sin(2 * np.pi * args.hum_hz * t + 0.3))
             else:
                 log = rows.copy()
                 at = np.arange(len(log)) / RATE_HZ if args.steady_clock else log[:, 0]
