@@ -502,6 +502,10 @@ def run_case(case: dict, work: Path) -> dict:
     if d.get("unexplained"):
         out["unexplained_because"] = d["unexplained"]["because"]
         out["closest"] = sorted((c["effect"], c["joint"]) for c in d["unexplained"].get("closest", []))
+        # the sensor's findings said as the record's cause (no case of the matrix has any on its sensor)
+        said = sorted(k for k in ("sensor_disturbance", "mains_tone") if d["unexplained"].get(k))
+        if said:
+            out["sensor_causes"] = said
     if case["group"] == "singles":
         said = shown_row(d, case, joint)
         if said is not None:
@@ -651,6 +655,8 @@ def summary(rows: list[dict]) -> dict:
         # and of the singles whose hidden magnitude is at or above what the report says the record
         # shows, the share named right (the report's own estimate sorts them: beside the score)
         "singles_said_shown": len(shown_singles), "singles_said_shown_right_pct": pct(shown_singles),
+        # interference on the sensor said as a record's cause where the matrix put none
+        "sensor_causes_said": sum(bool(r.get("sensor_causes")) for r in rows),
     }
 
 
@@ -736,6 +742,7 @@ def main() -> int:
               f"{s['singles_said_shown_right_pct']:.1f} % (the hidden magnitude at or above 'shows from'; beside the score)")
     print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
           f"(the hidden effect is the runner-up)")
+    print(f"  {'sensor interference said':38s} {s['sensor_causes_said']} records (none carries any: want 0)")
     med = s["median_diagnose_s"]
     print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
     if args.json:
