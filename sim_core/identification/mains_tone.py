@@ -1,6 +1,7 @@
 """Mains interference on the measured position, seen as a steady line where mains aliases.
 
-A potentiometer's wiring picks up the mains (50 or 60 Hz, and its odd harmonics from rectifier loads);
+A potentiometer's wiring picks up the mains (50 or 60 Hz, with a rectifier's ripple at twice that and
+a third harmonic from saturating transformers);
 a logger without an anti-alias filter folds it to ``|k F - m f_s|``: 60 Hz logged at 50 Hz is a 10 Hz
 line, its third harmonic a 20 Hz one; at 200 Hz both are logged as they are. No motion of the joint
 makes it (the command does not drive the joint there, and the model replays the command), so the
@@ -17,14 +18,14 @@ aliasing by this logger (:func:`bands`), its velocity residual has
 * most of the misfit: at least SHARE_MIN of the residual's power;
 * the same size throughout: the band's energy over windows of the record varies by at most
   STEADY_CV (coefficient of variation). A mode rung by steps varies by more than 1 (measured on
-  8 and 10 Hz modes in the rig template's closed-loop records: 1.24, 1.25; 60 Hz hum under a clock
-  jittered by 10 %: 0.12-0.16);
+  8 and 10 Hz modes in the rig templates' closed-loop records: 1.24, 1.25; 60 Hz hum on the same
+  records, with a steady or a 10 %-jittered clock, read by the controller or not: 0.04-0.16);
 * no motion of the model there: the model's own velocity (the logged command replayed) has at most
   MOTION_RATIO of the residual's energy in the band. A joint driven at that frequency (a sine
   excitation) whose gain the model misses leaves a steady line too, beside a larger one of its own.
   Hum the controller reads back (the same sensor wired to both) is logged in the command as well;
-  the model driven by it moves at the alias, but a loop that crosses over at a few hertz moves a
-  fraction of the line there.
+  the model driven by that command moves at the alias as the joint did, by a fraction of the line
+  (a loop that crosses over at a few hertz), and the residual keeps the hum.
 
 A line that aliases to within a few hertz of zero (50 Hz mains on a 50 Hz or 10 Hz log) is a slow
 wave that a record of a minute cannot tell from a drift; it is not judged here.
@@ -37,7 +38,7 @@ import math
 import numpy as np
 
 MAINS_HZ = (50.0, 60.0)
-HARMONICS = (1, 2, 3)        # the fundamental and the harmonics a rectifier load puts on the wiring
+HARMONICS = (1, 2, 3)        # the fundamental and the two harmonics picked up beside it
 MAINS_TOLERANCE = 0.01       # the mains' frequency, +- this share (a grid holds 0.4 %; a generator set less well)
 LINE_CONTRAST = 10.0         # the band's strongest bin over the median of the spectrum outside the band
 SHARE_MIN = 0.5              # share of the velocity residual's power in the band
@@ -66,11 +67,8 @@ def bands(rate_hz: float, jitter_s: float, resolution_hz: float) -> list[dict]:
             half = k * mains * MAINS_TOLERANCE + 2.0 * diffusion * rate_hz / (4.0 * math.pi) + 2.0 * resolution_hz
             if 2.0 * half > alias:
                 continue
-            lo, hi = alias - half, min(alias + half, nyquist)
-            if lo >= hi:
-                continue
             out.append({"mains_hz": mains, "harmonic": k, "alias_hz": round(alias, 3),
-                        "band_hz": (round(lo, 3), round(hi, 3))})
+                        "band_hz": (round(alias - half, 3), round(min(alias + half, nyquist), 3))})
     return out
 
 
