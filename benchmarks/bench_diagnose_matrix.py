@@ -506,6 +506,8 @@ def run_case(case: dict, work: Path) -> dict:
         said = sorted(k for k in ("sensor_disturbance", "mains_tone") if d["unexplained"].get(k))
         if said:
             out["sensor_causes"] = said
+        if d["unexplained"].get("parameter_drift"):     # the rig said to change during the record (none does)
+            out["drift_said"] = [m["parameter"] for m in d["unexplained"]["parameter_drift"]["moved"]]
     if case["group"] == "singles":
         said = shown_row(d, case, joint)
         if said is not None:
@@ -657,6 +659,8 @@ def summary(rows: list[dict]) -> dict:
         "singles_said_shown": len(shown_singles), "singles_said_shown_right_pct": pct(shown_singles),
         # interference on the sensor said as a record's cause where the matrix put none
         "sensor_causes_said": sum(bool(r.get("sensor_causes")) for r in rows),
+        # and a rig that changed during the record, where none of the matrix's does
+        "drift_said": sum(bool(r.get("drift_said")) for r in rows),
     }
 
 
@@ -743,6 +747,7 @@ def main() -> int:
     print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
           f"(the hidden effect is the runner-up)")
     print(f"  {'sensor interference said':38s} {s['sensor_causes_said']} records (none carries any: want 0)")
+    print(f"  {'the rig said to change':38s} {s['drift_said']} records (none changes: want 0)")
     med = s["median_diagnose_s"]
     print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
     if args.json:

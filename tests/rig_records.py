@@ -40,7 +40,7 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
                        start_offset: float = 0.0, jitter: float = 0.1, log_every: int = 1,
                        extra: tuple[tuple[str, dict], ...] = (), ti: float | None = None,
                        reference_range: tuple[float, float] | None = None, reference=reference_steps,
-                       interference=None):
+                       interference=None, during=None):
     """Simulate the rig under P control; returns (rows [N, 3]: time, sensor V, command V, truth spec).
 
     ``off``: {parameter path: factor} applied to the truth model (the nominal spec stays as written);
@@ -53,7 +53,8 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     ``reference_range``: (low, high) of the set points (default: the middle 60 % of the range);
     ``reference``: how the set point moves in it (``reference_steps`` or ``sine_reference``);
     ``interference``: volts the sensor's wiring adds at time t (s) (mains hum), read by the controller
-    and logged alike."""
+    and logged alike; ``during(context, t)``: called before each step with the truth's context (a
+    parameter that drifts, a load picked up mid-record)."""
     rng = np.random.default_rng(seed)
     plant = Plant.from_robot(rig_dir)
     spec = plant.spec.copy()
@@ -79,6 +80,8 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     t, integral = 0.0, 0.0
     y = sim.sample()[0]
     while t < duration:
+        if during is not None:
+            during(ctx, t)
         volts = float(y[L.YA_SENS_V]) + (interference(t) if interference is not None else 0.0)
         pos = A * volts + B                      # the rig's controller reads its own sensor
         e = ref(t) - pos

@@ -175,4 +175,5 @@ def test_a_10_hz_mode_the_model_lacks_is_not_said_as_mains(cli, tmp_path):
     assert d["verdict"] == "unexplained_discrepancy", d["selected"]
     u = d["unexplained"]
     assert "mains_tone" not in u and not any("steady line" in c for c in u["record_causes"])
+    assert "parameter_drift" not in u          # the same rig all through: no change said either
     assert u["evidence"]["swing"]["frequency"]["peak_hz"] == pytest.approx(10.0, abs=1.0)

@@ -35,4 +35,5 @@ def test_hum_on_the_position_sensor_is_unexplained_with_the_sensor_as_its_cause(
     assert far.get("velocity", 0.0) > u["far_points"]
     assert u["record_causes"][0].startswith("the position of lift carries a disturbance")
     assert "mains_tone" not in u      # 50 Hz at a 50 Hz log folds to near 0 Hz: a random walk, no line
+    assert "parameter_drift" not in u  # nor is the rig said to change
     assert any("controller's rate" in c for c in u["record_causes"][1:])     # closed loop: still listed after it

@@ -29,7 +29,7 @@ from ..dataset import column_unit
 from ..ingest import pressure_band
 from . import output_error as oe
 from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
-               outside_range, polarity, sensor_disturbance)
+               outside_range, parameter_drift, polarity, sensor_disturbance)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .beyond_range import BeyondRange, stopped_at_an_end
@@ -551,6 +551,18 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
                                ceilings, closed_loop=bool(loop["closed_loop"]))
+    if unexplained and val is None and cal.identified:
+        # a rig that changed while it was logged: calibrated again on the validation part alone
+        t_drift = time.perf_counter()
+        drift = parameter_drift.check(
+            base_fast, rec, split, vprob.joints, fast.substep, cal.changes, ceilings,
+            lambda model, runner, prob: calibrate_side_by_side(model, runner, prob, free=pl.free, why=pl.why))
+        timings["drift"] = time.perf_counter() - t_drift
+        if drift:
+            unexplained["parameter_drift"] = drift
+            held = [c for c in unexplained["record_causes"] if c == HELD_REPLAY]
+            unexplained["record_causes"] = ([c for c in unexplained["record_causes"] if c != HELD_REPLAY]
+                                            + [parameter_drift.cause(drift)] + held)
     if unexplained:
         # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
         # bank: say so, with the replay that fixes it

@@ -94,6 +94,17 @@ class Record:
                       {k: (a[:n], b[:n]) for k, (a, b) in self.pressures.items()}, self.joint_names,
                       self.excited, self.initial_pose, self.notes, self.pose_kind)
 
+    def tail(self, start: int) -> "Record":
+        """The samples from ``start`` on as a record of their own: time from 0 again, the start pose
+        each measured joint's reading there (:func:`first_reading`)."""
+        t = self.time[start:] - self.time[start]
+        angles = {k: v[start:] for k, v in self.angles.items()}
+        pose = dict(self.initial_pose)
+        pose.update({k: first_reading(t, v)[0] for k, v in angles.items()})
+        return Record(self.source, t, self.U[start:], angles,
+                      {k: (a[start:], b[start:]) for k, (a, b) in self.pressures.items()}, self.joint_names,
+                      self.excited, pose, self.notes, "reading")
+
 
 @dataclass
 class DataCheck:
