@@ -553,11 +553,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                                ceilings, closed_loop=bool(loop["closed_loop"]))
     if unexplained and val is None and cal.identified:
         # a rig that changed while it was logged: calibrated again on the validation part alone
-        t_drift = time.perf_counter()
         drift = parameter_drift.check(
             base_fast, rec, split, vprob.joints, fast.substep, cal.changes, ceilings,
             lambda model, runner, prob: calibrate_side_by_side(model, runner, prob, free=pl.free, why=pl.why))
-        timings["drift"] = time.perf_counter() - t_drift
+        timings["drift"] = time.perf_counter() - t_start
         if drift:
             unexplained["parameter_drift"] = drift
             held = [c for c in unexplained["record_causes"] if c == HELD_REPLAY]
