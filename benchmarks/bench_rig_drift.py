@@ -80,7 +80,7 @@ def main() -> int:
     read = ["--no-header", "--column", "time=0", "--column", f"q_{joint}=1:sensor_volts", "--column", f"u_{joint}=2"]
     kinds = args.changes.split(",")
     sizes = dict(zip([k for k in kinds if k != "none"], map(float, args.size.split(","))))
-    counts = {"changed": 0, "unexplained": 0, "said": 0, "named": 0, "clean_wrong": 0, "clean": 0}
+    results = []        # (change, verdict, change said, effect named) per case
     for seed in map(int, args.seeds.split(",")):
         for kind in kinds:
             rows, _ = closed_loop_record(work / "rig", hidden=None, seed=seed, start_offset=0.03,
@@ -97,17 +97,13 @@ def main() -> int:
                   f"{'said: ' + moved if drift else 'not said'}"
                   + (f" (later part {drift['score_before']:.1f} -> {drift['score_after']:.1f}, ceiling {drift['ceiling']:.1f})"
                      if drift else ""), flush=True)
-            if kind == "none":
-                counts["clean"] += 1
-                counts["clean_wrong"] += d["verdict"] != "no_significant_discrepancy"
-            else:
-                counts["changed"] += 1
-                counts["unexplained"] += d["verdict"] == "unexplained_discrepancy"
-                counts["said"] += bool(drift)
-                counts["named"] += bool(d["selected"])
-    print(f"\nchanged rigs ({counts['changed']} cases): unexplained_discrepancy {counts['unexplained']}, the change said "
-          f"{counts['said']}, a bank effect named {counts['named']} (want 0); unchanged: {counts['clean_wrong']} of "
-          f"{counts['clean']} not clean (want 0)")
+            results.append((kind, d["verdict"], bool(drift), bool(d["selected"])))
+    changed = [r for r in results if r[0] != "none"]
+    unchanged = [r for r in results if r[0] == "none"]
+    print(f"\nchanged rigs ({len(changed)} cases): unexplained_discrepancy "
+          f"{sum(r[1] == 'unexplained_discrepancy' for r in changed)}, the change said {sum(r[2] for r in changed)}, "
+          f"a bank effect named {sum(r[3] for r in changed)} (want 0); unchanged: "
+          f"{sum(r[1] != 'no_significant_discrepancy' for r in unchanged)} of {len(unchanged)} not clean (want 0)")
     return 0
 
 

@@ -4,14 +4,13 @@ each with a case that fails when the rule is deleted or inverted, and end to end
 sensor, read by its controller and logged at 50 Hz, is said as mains at 10 Hz; a 10 Hz mode the model
 lacks in the same rig's record is not."""
 
-import json
 import math
 
 import numpy as np
 import pytest
 from scipy import signal
 
-from rig_records import closed_loop_record, write_headerless
+from rig_records import closed_loop_record, diagnose_log, write_headerless
 from sim_core.identification import mains_tone as mt
 from sim_core.identification.residual_tests import spectrum
 
@@ -140,10 +139,7 @@ def _rig_log(tmp_path, **kw):
 
 def _diagnose(cli, tmp_path, rows):
     write_headerless(rows, tmp_path / "log.csv")
-    proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / "log.csv", "--no-header", "--column", "time=0",
-               "--column", "q_swing=1:sensor_volts", "--column", "u_swing=2", "--report", tmp_path / "rep", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    return json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    return diagnose_log(cli, tmp_path, "rep", "swing")[0]
 
 
 def test_60_hz_hum_read_by_the_controller_and_logged_at_50_hz_is_said_as_mains(cli, tmp_path):

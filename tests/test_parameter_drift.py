@@ -5,12 +5,10 @@ is unexplained, nothing named, with the load's change said as the record's cause
 the same all through the record (tests/test_mains_tone.py's 10 Hz mode, tests/test_diagnose_
 unexplained.py's 8 Hz mode, whose record causes must stay empty) keeps no such cause."""
 
-import json
-
 import numpy as np
 import pytest
 
-from rig_records import closed_loop_record, write_headerless
+from rig_records import closed_loop_record, diagnose_log, write_headerless
 from sim_core.identification import parameter_drift as pd
 from sim_core.identification.record import Record
 
@@ -69,10 +67,7 @@ def test_a_load_picked_up_half_way_is_said_as_the_rig_changing(cli, tmp_path):
     rows, _ = closed_loop_record(tmp_path / "rig", hidden=None, seed=3, start_offset=0.03,
                                  off={"joints.boom.valve.rated_flow": 1.1, "supply.pressure": 0.9}, during=pick_up)
     write_headerless(rows, tmp_path / "log.csv")
-    proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / "log.csv", "--no-header", "--column", "time=0",
-               "--column", "q_boom=1:sensor_volts", "--column", "u_boom=2", "--report", tmp_path / "rep", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    d, _ = diagnose_log(cli, tmp_path, "rep", "boom")
     assert d["verdict"] == "unexplained_discrepancy" and d["selected"] == [], (d["selected"], d["unexplained"])
     u = d["unexplained"]
     drift = u["parameter_drift"]
