@@ -1,9 +1,9 @@
 """The rig changed during the record: calibrated on its later part alone, the model fits that part.
 
 A model the bank extends assumes one rig for the whole record. Real ones change while they are
-logged: oil warms up over the first minutes (its viscosity halves, the valve passes more and the
-seals drag less), a pump's compensator or an accumulator lets the supply sag, a load is picked up
-half way. The baseline is calibrated on the first part of the record (the estimation window) and
+logged: oil warms up over the first minutes (its viscosity falls several-fold: leaks grow, seals drag
+less, a valve passes more at small openings), a pump's compensator or an accumulator lets the supply
+sag, a load is picked up half way. The baseline is calibrated on the first part of the record (the estimation window) and
 misses the rest, the residual grows towards the end, and no effect of the bank explains it: the
 record is unexplained. Which it is cannot be told from the misfit alone (a missing piece of physics
 leaves one too), but this can: calibrated again on the validation part by itself, the same model
@@ -122,6 +122,6 @@ def cause(found: dict) -> str:
     return (f"the rig changed during the record: calibrated again on the record from {found['from_s']:.1f} s on alone, "
             f"the model fits that part at {found['score_after']:.1f} (its noise ceiling {found['ceiling']:.1f}) against "
             f"{found['score_before']:.1f} with the first part's calibration, and moved {moved}. Oil warming up "
-            "(the valve passes more, the seals drag less), a supply that sags, a load picked up or set down do this; "
+            "(leaks grow, seals drag less), a supply that sags, a load picked up or set down do this; "
             "log a rig at working temperature with one load, or diagnose the parts apart (the effects tried are the "
             "closest, not its cause)")
