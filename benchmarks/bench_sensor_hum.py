@@ -83,8 +83,8 @@ def main() -> int:
             d = json.loads((work / "rep" / "diagnosis.json").read_text())
             named = ", ".join(s["effect"] + (" (ambiguous)" if s.get("ambiguous") else "") for s in d["selected"])
             fits, ceil = d["extended"]["channels"][joint], d["decision"]["channel_ceilings"][joint]
-            causes = (d.get("unexplained") or {}).get("record_causes") or [""]
             u = d.get("unexplained") or {}
+            causes = u.get("record_causes") or [""]
             line = u.get("mains_tone", {}).get(joint)
             first = "-"
             if joint in u.get("sensor_disturbance", {}) and causes[0].startswith(f"the position of {joint} carries a dist"):

@@ -559,9 +559,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         timings["drift"] = time.perf_counter() - t_start
         if drift:
             unexplained["parameter_drift"] = drift
-            held = [c for c in unexplained["record_causes"] if c == HELD_REPLAY]
-            unexplained["record_causes"] = ([c for c in unexplained["record_causes"] if c != HELD_REPLAY]
-                                            + [parameter_drift.cause(drift)] + held)
+            causes = unexplained["record_causes"]
+            causes.insert(causes.index(HELD_REPLAY) if HELD_REPLAY in causes else len(causes),
+                          parameter_drift.cause(drift))
     if unexplained:
         # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
         # bank: say so, with the replay that fixes it

@@ -37,6 +37,8 @@ import math
 
 import numpy as np
 
+from ..ingest.timegrid import regular_deviations
+
 MAINS_HZ = (50.0, 60.0)
 HARMONICS = (1, 2, 3)        # the fundamental and the two harmonics picked up beside it
 MAINS_TOLERANCE = 0.01       # the mains' frequency, +- this share (a grid holds 0.4 %; a generator set less well)
@@ -114,13 +116,13 @@ def found(tests: dict[str, dict], time: np.ndarray, rate_hz: float) -> dict[str,
     sample times over the same samples, s) carries a
     steady mains line: the band's row of :func:`bands` and its figures of :func:`line`. Of several
     bands that hold one, the one with the most power."""
-    t = np.asarray(time, dtype=float)
-    period = np.diff(t)
-    regular = period[period < 1.5 * np.median(period)] if period.size else period   # gaps left out
-    jitter = float(np.sqrt(np.mean((regular - np.median(period)) ** 2))) if regular.size else 0.0
+    period = np.diff(np.asarray(time, dtype=float))
+    dev = regular_deviations(period)[2] if period.size else period
+    jitter = float(np.sqrt(np.mean(dev ** 2))) if dev.size else 0.0
     out: dict[str, dict] = {}
     for j, test in tests.items():
-        spectrum, residual, simulated = (test.get(k) for k in ("_spectrum", "_velocity_residual", "_velocity_simulated"))
+        spectrum, residual, simulated = (test.get(k) for k in
+                                         ("_spectrum", "_velocity_residual", "_velocity_simulated"))
         if spectrum is None or residual is None or simulated is None or len(spectrum[0]) < 2:
             continue
         resolution = float(spectrum[0][1] - spectrum[0][0])
@@ -140,10 +142,13 @@ def found(tests: dict[str, dict], time: np.ndarray, rate_hz: float) -> dict[str,
 def cause(joint: str, finding: dict) -> str:
     """The record cause for one joint of :func:`found`."""
     k = finding["harmonic"]
-    source = f"{finding['mains_hz']:g} Hz mains" + ("" if k == 1 else f" (its harmonic {k}, {k * finding['mains_hz']:g} Hz)")
+    source = f"{finding['mains_hz']:g} Hz mains"
+    if k != 1:
+        source += f" (its harmonic {k}, {k * finding['mains_hz']:g} Hz)"
     lo, hi = finding["band_hz"]
-    return (f"the position of {joint} carries a steady line at {finding['peak_hz']:.2f} Hz ({100 * finding['share']:.0f} % "
-            f"of the velocity misfit, in {lo:.2f}-{hi:.2f} Hz, the same size throughout the record): where {source} "
+    return (f"the position of {joint} carries a steady line at {finding['peak_hz']:.2f} Hz "
+            f"({100 * finding['share']:.0f} % of the velocity misfit, in {lo:.2f}-{hi:.2f} Hz, the same size "
+            f"throughout the record): where {source} "
             f"falls at this log's rate ({finding['alias_hz']:.2f} Hz). Mains picked up by the sensor's wiring and "
             "sampled without an anti-alias filter does this; a misfit of the joint's motion, rung by the command, "
             "would come and go with it. Shield the sensor's cable or filter it before the logger (below half the "

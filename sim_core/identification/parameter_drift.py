@@ -51,9 +51,8 @@ def still_start(rec, start: int, joints: list[str]) -> int:
     return start + int(np.argmin(speed))
 
 
-def _score(prob: oe.Problem, out) -> float:
-    fits = prob.fits(out)
-    return float(np.mean([fits[j]["score"] for j in prob.joints]))
+def _score(fits: dict) -> float:
+    return float(np.mean([f["score"] for f in fits.values()]))
 
 
 def check(model, rec, start: int, joints: list[str], substep: float | None, changes: list[dict],
@@ -73,15 +72,15 @@ def check(model, rec, start: int, joints: list[str], substep: float | None, chan
     before = runner.simulate(model)
     if not before.ok:
         return {}
-    score_before = _score(prob, before)
     fits = prob.fits(before)
+    score_before = _score(fits)
     ceiling = float(np.mean([np.mean([ceilings.get(j, {}).get(c, 100.0) for c in fits[j] if c != "score"])
                              for j in joints]))
     cal = calibrate(model, runner, prob)
     after = runner.simulate(cal.spec)
     if not after.ok:
         return {}
-    score_after = _score(prob, after)
+    score_after = _score(prob.fits(after))
     if not closes(score_before, score_after, ceiling):
         return {}
     shifted = moved(changes, cal.changes)
@@ -117,10 +116,11 @@ def moved(first: list[dict], last: list[dict]) -> list[dict]:
 
 def cause(found: dict) -> str:
     """The record cause for :func:`check`'s finding."""
-    moved = "; ".join(f"{m['parameter']} {m['first']:.4g} -> {m['last']:.4g} {m['unit']} ({m['sigmas']:.0f} sigma)".replace("  ", " ")
-                      for m in found["moved"])
-    return (f"the rig changed during the record: calibrated again on the record from {found['from_s']:.1f} s on alone, "
-            f"the model fits that part at {found['score_after']:.1f} (its noise ceiling {found['ceiling']:.1f}) against "
+    moved = "; ".join(f"{m['parameter']} {m['first']:.4g} -> {m['last']:.4g}" + (f" {m['unit']}" if m["unit"] else "")
+                      + f" ({m['sigmas']:.0f} sigma)" for m in found["moved"])
+    return (f"the rig changed during the record: calibrated again on the record from {found['from_s']:.1f} s on "
+            f"alone, the model fits that part at {found['score_after']:.1f} (its noise ceiling "
+            f"{found['ceiling']:.1f}) against "
             f"{found['score_before']:.1f} with the first part's calibration, and moved {moved}. Oil warming up "
             "(leaks grow, seals drag less), a supply that sags, a load picked up or set down do this; "
             "log a rig at working temperature with one load, or diagnose the parts apart (the effects tried are the "

@@ -96,10 +96,8 @@ def residual_fails(test: dict, p_min: float = 0.01) -> bool:
 
 def evidence(rec, prob, out, start: int, tests: dict, fits: dict, ceilings: dict | None = None) -> dict:
     """Per diagnosed joint of ``prob``: :func:`joint_evidence` of the validation residual of ``out``
-    (``tests``: residual_tests' answer for ``out``, whose spectrum is reused; ``ceilings``: the
-    channels' noise ceilings per joint, when known)."""
-    from .metrics import velocity
-
+    (``tests``: residual_tests' answer for ``out``, whose velocity residual and spectrum are reused;
+    ``ceilings``: the channels' noise ceilings per joint, when known)."""
     res = {}
     if not out.ok:
         return res
@@ -107,8 +105,6 @@ def evidence(rec, prob, out, start: int, tests: dict, fits: dict, ceilings: dict
         tj = tests.get(j)
         if not tj:
             continue
-        n = prob.n
-        rw = velocity(rec.angles[j][:n], rec.dt)[start:] - velocity(out.angles[j][:n], rec.dt)[start:]
-        res[j] = joint_evidence(rec.time[start:n], rw, tj["_spectrum"], fits.get(j, {}),
+        res[j] = joint_evidence(rec.time[start:prob.n], tj["_velocity_residual"], tj["_spectrum"], fits.get(j, {}),
                                 (ceilings or {}).get(j)) | {"tests_fail": residual_fails(tj)}
     return res

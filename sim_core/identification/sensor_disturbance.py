@@ -54,6 +54,6 @@ def cause(joint: str, finding: dict) -> str:
             f"{FAR_POINTS:g}), and the velocity residual is white (no autocorrelation beyond "
             f"{finding['largest_autocorrelation']:.2f}) where a misfit of the motion, driven through the joint's "
             "inertia, is coloured. Interference on the sensor's wiring aliased by the logger (mains hum sampled near "
-            "50 Hz), a worn or dirty potentiometer track or a loose connector do this. Shield the sensor's cable or filter it before the logger (an anti-alias "
-            "filter below half the log's rate) and record again; the effects tried on this record are the "
-            "closest, not its cause")
+            "50 Hz), a worn or dirty potentiometer track or a loose connector do this. Shield the sensor's cable or "
+            "filter it before the logger (an anti-alias filter below half the log's rate) and record again; the "
+            "effects tried on this record are the closest, not its cause")

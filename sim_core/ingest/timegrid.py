@@ -95,6 +95,14 @@ class TimeGrid:
         return out
 
 
+def regular_deviations(periods: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(median period, mask of the gaps: intervals longer than GAP_FACTOR median periods, deviations
+    (s) of the other intervals from the median): what the jitter is measured on."""
+    med = float(np.median(periods))
+    gap = periods > GAP_FACTOR * med
+    return med, gap, periods[~gap] - med
+
+
 def check_grid(t: np.ndarray, *, where: str, label: str, place) -> tuple[TimeGrid, np.ndarray]:
     """Check a time column (s) in file order. Returns the grid report and the mask of rows to keep.
     ``place(row)`` names data row ``row`` (from 1) in messages: 'row 12 (line 13)'."""
@@ -123,10 +131,8 @@ def check_grid(t: np.ndarray, *, where: str, label: str, place) -> tuple[TimeGri
     if tk.size < 2:
         raise DatasetError(f"{where}column {label}: every timestamp is the same ({t[0]:g} s)")
     dk = np.diff(tk)
-    med = float(np.median(dk))
-    gap = dk > GAP_FACTOR * med
-    regular = dk[~gap]
-    dev = (regular - med) / med * 100.0 if regular.size else np.zeros(1)
+    med, gap, dev_s = regular_deviations(dk)
+    dev = dev_s / med * 100.0 if dev_s.size else np.zeros(1)
     grid = TimeGrid(
         source="column", rows=int(tk.size), median_period_s=med, rate_hz=1.0 / med,
         duration_s=float(tk[-1] - tk[0]),
