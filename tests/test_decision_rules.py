@@ -68,6 +68,28 @@ def test_bic_must_improve():
     assert better.accepted_ok, better.reasons
 
 
+def test_on_a_closed_loop_record_a_gain_on_the_whole_angle_alone_stands_in_for_the_replays_drift():
+    """The 10 Hz log of a 1 kHz loop: a 2.6 % valve asymmetry bought back 28 points of the whole-record
+    angle while the restarted angle lost 2.2 and the velocity 0.8: rejected. A leak on the same kind of
+    record gains on the restarted angle too; on an open-loop record there is no restarted channel."""
+    def with_channels(**ch):
+        ev = scored(cand())
+        ev.gain_channels = ch
+        return judged(ev)
+
+    drift = with_channels(angle=27.5, restarted=-2.2, velocity=-0.8)
+    assert not drift.accepted_ok and any("stands in for the drift" in r for r in drift.reasons)
+    assert "1.50 points" in drift.reasons[0]
+    leak = with_channels(angle=27.5, restarted=6.0, velocity=-0.8)
+    assert leak.accepted_ok, leak.reasons
+    slight = with_channels(angle=10.0, restarted=-0.4, velocity=-0.5)      # a mean loss of 0.45: noise
+    assert slight.accepted_ok, slight.reasons
+    open_loop = with_channels(angle=27.5, velocity=-0.8)
+    assert open_loop.accepted_ok, open_loop.reasons
+    assert dc.drift_stand_in({"restarted": -1.0, "velocity": -0.2}) == pytest.approx(0.6)
+    assert dc.drift_stand_in({"restarted": -0.2, "velocity": -0.2}) is None
+
+
 def test_a_parameter_on_a_search_bound_rejects_unless_it_is_where_the_effect_vanishes():
     two = cand(params=(("width", 0.0, 2.0, 0.0), ("gain", 0.5, 3.0, 1.0)))
     key_w, key_g = (fp.key for fp in two.free)

@@ -9,7 +9,9 @@ The rules, in the order they apply:
 
 * acceptance (:func:`judge`): gain >= max(2 points, 3 x the noise spread of the gain); BIC improves;
   no parameter on a search bound other than the one where the effect vanishes; at least one
-  parameter more than 3 sigma from "no effect";
+  parameter more than 3 sigma from "no effect"; on a closed-loop record (scored with the angle
+  restarted from the record) the channels that do not integrate must not lose more than 0.5 points
+  on average (:func:`drift_stand_in`);
 * recalibration (:func:`recalibration_kept`): once an effect is named, the calibration is redone
   with it on the estimation data; the redone one is kept unless it scores more than 2 points lower
   on the validation data (it fitted what the estimation window alone shows);
@@ -64,6 +66,8 @@ MAX_EFFECTS = 3
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
 WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
+DRIFT_LOSS_POINTS = 0.5     # mean loss of the local channels that marks a stand-in for the replay's drift
+LOCAL_CHANNELS = ("restarted", "velocity")   # channels an open-loop replay does not integrate errors into
 EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a named cause must close
 EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
 EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
@@ -187,6 +191,26 @@ def judge(ev: Evaluation, at_bound: dict[str, str]) -> None:
         ev.short_of_floor = need == THRESHOLD_POINTS
     if not ev.bic_delta < 0:
         ev.reasons.append(f"BIC does not improve ({ev.bic_delta:+.1f})")
+    loss = drift_stand_in(ev.gain_channels)
+    if loss is not None:
+        ev.reasons.append(f"it gains on the whole-record angle while the channels that do not integrate (velocity, "
+                          f"angle restarted from the record) lose {loss:.2f} points: it stands in for the drift of "
+                          f"the closed-loop record's open-loop replay")
+
+
+def drift_stand_in(gain_channels: dict[str, float]) -> float | None:
+    """The mean loss (points) of the local channels when a candidate stands in for a replay's drift;
+    None otherwise. On a closed-loop record the model replays the logged command open loop, and any
+    error in that command (its timing between samples) integrates into the angle over the whole
+    record, while the real loop pulled it back; a candidate can buy some of that drift back with a
+    bias (a slight asymmetry, an offset) and gain on the whole-record angle only. What the rig does
+    shows in the channels that do not integrate, the velocity and the angle restarted from the
+    record every few loop time constants: a cause of the rig does not make those worse. Only where
+    the record is scored with the restarted angle (closed loop)."""
+    if "restarted" not in gain_channels:
+        return None
+    loss = -float(np.mean([gain_channels[c] for c in LOCAL_CHANNELS if c in gain_channels]))
+    return loss if loss > DRIFT_LOSS_POINTS else None
 
 
 # ---- forward selection ----------------------------------------------------------------------------------

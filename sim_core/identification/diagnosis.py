@@ -28,7 +28,7 @@ import numpy as np
 from ..dataset import column_unit
 from ..ingest import pressure_band
 from . import output_error as oe
-from . import (blind_spots, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
+from . import (blind_spots, command_hold, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
                outside_range, parameter_drift, polarity, sensor_disturbance)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
@@ -250,6 +250,24 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             return calibrate(*args, side=side, **kw)
 
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
+    loop = detect_closed_loop(rec, spec)
+    if loop["closed_loop"]:
+        # what the valve saw between the logged samples: held, or the period's mean (command_hold.py)
+        closed = [j for j, e in loop["joints"].items() if e["closed_loop"]]
+        moving = command_hold.replayed(rec, closed)
+        mean_est = oe.Problem(moving, targets, n=est.n, pressures=est.use_pressures)
+        loop["command_hold"] = hold = command_hold.choose(
+            est.fits(fast.simulate(cal.spec, est.n)),
+            mean_est.fits(Runner(moving, fast.substep).simulate(cal.spec, est.n)), closed)
+        if hold["replay"] == command_hold.PERIOD_MEAN:
+            gain = hold["velocity_fit"][command_hold.PERIOD_MEAN] - hold["velocity_fit"][command_hold.HELD]
+            notes.append(command_hold.NOTE.format(gain=gain, joints=", ".join(closed)))
+            rec, val = moving, (None if val is None else command_hold.replayed(val, closed))
+            est, vprob, vrec, split = _split(rec, val, targets, [])
+            fast, vfast = Runner(rec, fast.substep), Runner(vrec, fast.substep)
+            accurate, vaccurate = Runner(rec), Runner(vrec)
+            cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
+        timings["command_hold"] = time.perf_counter() - t_start
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
     fast, vfast = _numerics_again(base_fast, fast, vfast, vprob, rec, val, vrec, numerics)
@@ -329,7 +347,6 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             pending[:], keys[:], recalibrations[:] = saved
         return back
 
-    loop = detect_closed_loop(rec, spec)
     if loop["closed_loop"]:
         notes.append(loop["note"])
         window = validation_window(loop)
@@ -550,7 +567,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
-                               ceilings, closed_loop=bool(loop["closed_loop"]))
+                               ceilings, replay_cause=_replay_cause(loop))
     if unexplained and val is None and cal.identified:
         # a rig that changed while it was logged: calibrated again on the validation part alone
         drift = parameter_drift.check(
@@ -560,8 +577,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if drift:
             unexplained["parameter_drift"] = drift
             causes = unexplained["record_causes"]
-            causes.insert(causes.index(HELD_REPLAY) if HELD_REPLAY in causes else len(causes),
-                          parameter_drift.cause(drift))
+            replay = _replay_cause(loop)
+            causes.insert(causes.index(replay) if replay in causes else len(causes), parameter_drift.cause(drift))
     if unexplained:
         # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
         # bank: say so, with the replay that fixes it
@@ -670,11 +687,11 @@ def _stand_in(ev, fp, value, s_with, s_effect, spec, model, vrec, runner, n, sta
 
 def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, ext_fits: dict, ext_out: Outputs,
                  ext_tests: dict, ceiling: float, selected: list[dict], ceilings: dict[str, dict[str, float]],
-                 closed_loop: bool = False) -> dict:
+                 replay_cause: str | None = None) -> dict:
     """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
-    model explains the record. ``ceilings``: the channels' noise ceilings per joint. ``closed_loop``:
-    whether the record is; if so, the held replay of its command is listed as a cause in the record
-    to check (``record_causes``)."""
+    model explains the record. ``ceilings``: the channels' noise ceilings per joint. ``replay_cause``:
+    on a closed-loop record, how its command was replayed, listed as a cause in the record to check
+    (``record_causes``; :func:`_replay_cause`)."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
     channel_fits = {j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints}
@@ -695,7 +712,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
            "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}
                        for s in selected],
            "evidence": residual_evidence(vrec, vprob, ext_out, split, ext_tests, ext_fits, ceilings),
-           "record_causes": causes + ([HELD_REPLAY] if closed_loop else [])}
+           "record_causes": causes + ([replay_cause] if replay_cause else [])}
     if disturbed:
         out["sensor_disturbance"] = {j: {"channels": [{"channel": ch, "fit": round(f, 2), "ceiling": round(c, 2)}
                                                       for ch, f, c in d["channels"]],
@@ -709,6 +726,15 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                                  "model_motion_ratio": round(m["model_motion_ratio"], 3)}
                              for j, m in mains.items()}
     return out
+
+
+def _replay_cause(loop: dict) -> str | None:
+    """What an unexplained closed-loop record's replay of its command leaves out (None: open loop)."""
+    if not loop.get("closed_loop"):
+        return None
+    if loop.get("command_hold", {}).get("replay") == command_hold.PERIOD_MEAN:
+        return command_hold.PERIOD_REPLAY
+    return HELD_REPLAY
 
 
 def _pct(v: float):

@@ -1,0 +1,90 @@
+"""What the valve saw between two logged samples of a closed-loop command (command_hold.py): held, when
+the controller ran at the log's rate, or the period's mean, when it ran faster; the record decides."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rig_records import as_record, closed_loop_record
+from sim_core.identification import command_hold as ch
+from sim_core.identification.diagnosis import run
+from sim_core.identification.metrics import nrmse_fit, velocity
+from sim_core.identification.simulation import Runner, model_spec
+from sim_core.model.spec import load_robot
+
+
+def test_the_period_mean_is_the_mean_of_the_two_samples_that_bound_each_period():
+    U = np.column_stack([np.arange(5.0), 10.0 * np.ones(5), [0.0, 0.0, 4.0, 4.0, 4.0]])
+    V = ch.period_mean(U, [0, 2])
+    assert V[:, 0].tolist() == [0.5, 1.5, 2.5, 3.5, 4.0]       # a ramp: its mean over each period
+    assert V[:, 2].tolist() == [0.0, 2.0, 4.0, 4.0, 4.0]       # a step between two samples: half of it
+    assert V[:, 1].tolist() == U[:, 1].tolist()                # a column not listed stays held
+    assert U[0, 0] == 0.0                                      # the record's own array is not changed
+
+
+def test_the_period_mean_is_kept_only_when_it_fits_the_velocity_better_by_the_margin():
+    held = {"a": {"velocity": 90.0}, "b": {"velocity": 99.0}}
+    ahead = ch.choose(held, {"a": {"velocity": 91.0}, "b": {"velocity": 10.0}}, ["a"])   # b is not closed loop
+    assert ahead["replay"] == ch.PERIOD_MEAN and ahead["velocity_fit"] == {ch.HELD: 90.0, ch.PERIOD_MEAN: 91.0}
+    level = ch.choose(held, {"a": {"velocity": 90.0 + 0.5 * ch.MARGIN_POINTS}, "b": {"velocity": 99.0}}, ["a"])
+    assert level["replay"] == ch.HELD
+    behind = ch.choose(held, {"a": {"velocity": 85.0}, "b": {"velocity": 99.0}}, ["a"])
+    assert behind["replay"] == ch.HELD
+    both = ch.choose(held, {"a": {"velocity": 91.0}, "b": {"velocity": 97.0}}, ["a", "b"])   # the mean: 94 < 94.5
+    assert both["replay"] == ch.HELD
+
+
+@pytest.fixture(scope="module")
+def rotary(tmp_path_factory):
+    import subprocess
+    import sys
+
+    rig = tmp_path_factory.mktemp("hold") / "rig"
+    subprocess.run([sys.executable, "-m", "sim_core.cli", "rig", "new", "rotary", "--out", str(rig)], check=True,
+                   capture_output=True)
+    return rig
+
+
+def _log(rig, log_every, seed=3):
+    spec = load_robot(rig)
+    j = spec.joint_names[0]
+    i = spec.tree.index(spec.joint(j).dof)
+    span = float(spec.tree.upper[i] - spec.tree.lower[i])
+    off = {f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}
+    rows, truth = closed_loop_record(rig, hidden=None, off=off, seed=seed, start_offset=0.05 * span,
+                                     log_every=log_every)
+    return spec, j, as_record(spec, rows), truth
+
+
+@pytest.mark.parametrize("log_every", [1, 20])
+def test_the_right_replay_fits_the_truths_velocity_better(rotary, log_every):
+    """The physics the choice rests on: the rig's own truth model, replayed on its 50 Hz log, follows
+    the recorded velocity closer held when its controller ran at 50 Hz and closer with the period's
+    mean when it ran at 1 kHz."""
+    _, j, rec, truth = _log(rotary, log_every)
+    fits = {}
+    for name, r in (("held", rec), ("mean", ch.replayed(rec, [j]))):
+        out = Runner(r).simulate(model_spec(truth))
+        fits[name] = nrmse_fit(velocity(rec.angles[j], rec.dt), velocity(out.angles[j], rec.dt))
+    right, wrong = (fits["held"], fits["mean"]) if log_every == 1 else (fits["mean"], fits["held"])
+    assert right > wrong + 1.0, fits
+    assert right > 95.0, fits
+
+
+@pytest.mark.parametrize("log_every,replay", [(1, ch.HELD), (20, ch.PERIOD_MEAN)])
+def test_the_diagnosis_replays_the_command_as_the_record_was_taken(rotary, log_every, replay):
+    """A clean rotary rig under its P controller at the log's 50 Hz and at 1 kHz logged every 20th
+    sample: the diagnosis keeps the replay the controller's rate calls for, says so, and names nothing
+    (at 1 kHz a 6 % valve asymmetry was named with the held replay)."""
+    spec, j, rec, _ = _log(rotary, log_every)
+    d = run(spec, rec, progress=False).to_json()
+    hold = d["closed_loop_evidence"]["command_hold"]
+    assert hold["replay"] == replay, hold
+    assert hold["joints"] == [j]
+    assert d["selected"] == [], d["selected"]
+    said = [n for n in d["data"]["notes"] if "mean of each two logged samples" in n]
+    assert len(said) == (replay == ch.PERIOD_MEAN)
+    if d["verdict"] == "unexplained_discrepancy":
+        causes = d["unexplained"]["record_causes"]
+        assert (ch.PERIOD_REPLAY in causes) == (replay == ch.PERIOD_MEAN)
