@@ -31,6 +31,12 @@ def register(sub):
                    help="where the simulation starts: the record's first readings (auto, data: the default; a sensor "
                         "offset is then told from the start pose by what depends on the true pose) or the robot's "
                         "initial positions (spec: the arm is known to start there, e.g. homed)")
+    p.add_argument("--command-hold", choices=("auto", "held", "period_mean"), default="auto",
+                   help="what the valve saw between two logged commands: held (the controller or signal source ran "
+                        "at the log's rate), period_mean (it ran faster, e.g. a 1 kHz PLC logged at 50 Hz, or a "
+                        "joystick sampled slowly: the mean of each two samples over the period between them, every "
+                        "commanded joint), or auto (default: on the joints found in closed loop, the one that fits "
+                        "the record's velocity better)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_model_options(p)
     add_reading_options(p)
@@ -74,7 +80,7 @@ def run(args):
         report.preload()             # the figures' library, imported while the diagnosis starts on one core
     try:
         d = diagnosis.run(spec, rec, val, workers=args.workers, progress=not args.quiet and sys.stderr.isatty(),
-                          log=log, effects=args.effects, backend=backend)
+                          log=log, effects=args.effects, backend=backend, command_hold=args.command_hold)
     finally:
         if backend is not None:
             backend.close()

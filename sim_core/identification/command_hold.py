@@ -34,11 +34,11 @@ MARGIN_POINTS = 0.25    # velocity fit (points) the period mean must gain over t
 
 HELD = "held"
 PERIOD_MEAN = "period_mean"
+AUTO = "auto"
+CHOICES = (AUTO, HELD, PERIOD_MEAN)    # diagnose --command-hold
 
-NOTE = ("the command is replayed as the mean of each two logged samples, held over the period between them: "
-        "the record is fitted {gain:+.1f} points better in velocity that way than holding each sample ({joints}), "
-        "as a controller faster than its logger makes it. How each move started within its period is not in the "
-        "log; log the command at the controller's rate")
+NOTE = ("the command is replayed as the mean of each two logged samples, held over the period between them ({joints}): "
+        "{why}. How each move started within its period is not in the log; log the command at the controller's rate")
 
 # Said beside an unexplained verdict when the period mean is replayed (closed_loop.HELD_REPLAY otherwise)
 PERIOD_REPLAY = ("the record is closed loop and its controller runs faster than its log: the command is replayed "
@@ -61,12 +61,27 @@ def replayed(rec: Record, joints: list[str]) -> Record:
     return replace(rec, U=period_mean(rec.U, [rec.joint_names.index(j) for j in joints]))
 
 
-def choose(held: dict[str, dict[str, float]], mean: dict[str, dict[str, float]], joints: list[str]) -> dict:
+def choose(held: dict[str, dict[str, float]], mean: dict[str, dict[str, float]], joints: list[str],
+           given: str = AUTO) -> dict:
     """The replay the record was taken with, from the fits (per joint channel fits, points) of the
-    same model on the held and the period-mean replay; ``joints``: the closed-loop ones."""
+    same model on the held and the period-mean replay; ``joints``: the closed-loop ones. ``given``:
+    the user's choice ('held', 'period_mean'), which the fits are then only reported beside."""
     vh = float(np.mean([held[j]["velocity"] for j in joints]))
     vm = float(np.mean([mean[j]["velocity"] for j in joints]))
-    return {"replay": PERIOD_MEAN if vm - vh >= MARGIN_POINTS else HELD, "joints": list(joints),
-            "velocity_fit": {HELD: round(vh, 3), PERIOD_MEAN: round(vm, 3)}, "margin_points": MARGIN_POINTS,
-            "rule": f"the calibrated baseline's velocity fit on the closed-loop joints, the command replayed held "
-                    f"and as the mean of each two samples; the mean kept when better by {MARGIN_POINTS:g} points"}
+    out = {"replay": PERIOD_MEAN if vm - vh >= MARGIN_POINTS else HELD, "joints": list(joints),
+           "velocity_fit": {HELD: round(vh, 3), PERIOD_MEAN: round(vm, 3)}, "margin_points": MARGIN_POINTS,
+           "rule": f"the calibrated baseline's velocity fit on the closed-loop joints, the command replayed held "
+                   f"and as the mean of each two samples; the mean kept when better by {MARGIN_POINTS:g} points"}
+    if given != AUTO:
+        out.update(replay=given, rule="given (diagnose --command-hold)")
+    return out
+
+
+def note(hold: dict) -> str:
+    """The report's note on a period-mean replay."""
+    fits = hold["velocity_fit"]
+    gain = fits[PERIOD_MEAN] - fits[HELD]
+    why = (f"the record is fitted {gain:+.1f} points better in velocity that way than holding each sample, as a "
+           f"controller faster than its logger makes it" if hold["rule"].startswith("the calibrated")
+           else f"as given (--command-hold; {gain:+.1f} points of velocity fit against holding each sample)")
+    return NOTE.format(joints=", ".join(hold["joints"]), why=why)

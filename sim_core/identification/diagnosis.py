@@ -32,6 +32,7 @@ from . import (blind_spots, command_hold, command_null, command_scale, condition
                outside_range, parameter_drift, polarity, sensor_disturbance)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
+from .command_hold import CHOICES as HOLD_CHOICES
 from .beyond_range import BeyondRange, stopped_at_an_end
 from .candidates import bank
 from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
@@ -206,15 +207,21 @@ def _pressure_noise(rec: Record) -> dict[str, float]:
 
 
 def run(spec, rec: Record, val: Record | None = None, *, workers: int = 0, progress: bool = True,
-        log=None, effects: list[str] | None = None, backend=None) -> Diagnosis:
-    """``backend`` (:mod:`sim_core.backends`): where the candidate fits run, instead of the local pool."""
+        log=None, effects: list[str] | None = None, backend=None, command_hold: str = "auto") -> Diagnosis:
+    """``backend`` (:mod:`sim_core.backends`): where the candidate fits run, instead of the local pool.
+    ``command_hold``: how the logged commands are replayed between samples (:mod:`.command_hold`):
+    'auto' (the record decides, on its closed-loop joints), 'held' or 'period_mean' (every commanded joint)."""
+    if command_hold not in HOLD_CHOICES:
+        raise ValueError(f"command_hold {command_hold!r}: one of {', '.join(HOLD_CHOICES)}")
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):    # see selection.single_blas_thread
-        return _run(spec, rec, val, workers=workers, progress=progress, log=log, effects=effects, backend=backend)
+        return _run(spec, rec, val, workers=workers, progress=progress, log=log, effects=effects, backend=backend,
+                    hold_choice=command_hold)
 
 
-def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool, log, effects, backend) -> Diagnosis:
+def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool, log, effects, backend,
+         hold_choice: str = "auto") -> Diagnosis:
     log = log or (lambda msg: None)
     t_start = time.perf_counter()
     timings: dict = {}
@@ -251,18 +258,12 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     loop = detect_closed_loop(rec, spec)
-    if loop["closed_loop"]:
-        # what the valve saw between the logged samples: held, or the period's mean (command_hold.py)
-        closed = [j for j, e in loop["joints"].items() if e["closed_loop"]]
-        moving = command_hold.replayed(rec, closed)
-        mean_est = oe.Problem(moving, targets, n=est.n, pressures=est.use_pressures)
-        loop["command_hold"] = hold = command_hold.choose(
-            est.fits(fast.simulate(cal.spec, est.n)),
-            mean_est.fits(Runner(moving, fast.substep).simulate(cal.spec, est.n)), closed)
+    hold = _command_hold(hold_choice, loop, rec, est, fast, cal.spec)
+    if hold is not None:
+        loop["command_hold"] = hold
         if hold["replay"] == command_hold.PERIOD_MEAN:
-            gain = hold["velocity_fit"][command_hold.PERIOD_MEAN] - hold["velocity_fit"][command_hold.HELD]
-            notes.append(command_hold.NOTE.format(gain=gain, joints=", ".join(closed)))
-            rec, val = moving, (None if val is None else command_hold.replayed(val, closed))
+            notes.append(command_hold.note(hold))
+            rec, val = (None if r is None else command_hold.replayed(r, hold["joints"]) for r in (rec, val))
             est, vprob, vrec, split = _split(rec, val, targets, [])
             fast, vfast = Runner(rec, fast.substep), Runner(vrec, fast.substep)
             accurate, vaccurate = Runner(rec), Runner(vrec)
@@ -726,6 +727,20 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                                  "model_motion_ratio": round(m["model_motion_ratio"], 3)}
                              for j, m in mains.items()}
     return out
+
+
+def _command_hold(choice: str, loop: dict, rec: Record, est: oe.Problem, fast: Runner, model) -> dict | None:
+    """How the record's commands are replayed between samples (command_hold.choose), from the calibrated
+    baseline ``model`` simulated on both replays: on the joints found in closed loop ('auto'; None when
+    there are none) or, as the user gave it, on every commanded joint."""
+    joints = ([j for j, e in loop["joints"].items() if e["closed_loop"]] if choice == command_hold.AUTO
+              else list(est.joints))
+    if not joints:
+        return None
+    moving = command_hold.replayed(rec, joints)
+    mean_est = oe.Problem(moving, est.joints, n=est.n, pressures=est.use_pressures)
+    return command_hold.choose(est.fits(fast.simulate(model, est.n)),
+                               mean_est.fits(Runner(moving, fast.substep).simulate(model, est.n)), joints, choice)
 
 
 def _replay_cause(loop: dict) -> str | None:
