@@ -46,7 +46,8 @@ def rotary(tmp_path_factory):
     return rig
 
 
-def _log(rig, log_every, seed=3):
+def _rows(rig, log_every, seed=3):
+    """The 50 Hz log of the rig's P loop run at ``log_every`` x 50 Hz, its valve flow and supply off."""
     spec = load_robot(rig)
     j = spec.joint_names[0]
     i = spec.tree.index(spec.joint(j).dof)
@@ -54,6 +55,11 @@ def _log(rig, log_every, seed=3):
     off = {f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}
     rows, truth = closed_loop_record(rig, hidden=None, off=off, seed=seed, start_offset=0.05 * span,
                                      log_every=log_every)
+    return spec, j, rows, truth
+
+
+def _log(rig, log_every, seed=3):
+    spec, j, rows, truth = _rows(rig, log_every, seed)
     return spec, j, as_record(spec, rows), truth
 
 
@@ -88,3 +94,35 @@ def test_the_diagnosis_replays_the_command_as_the_record_was_taken(rotary, log_e
     if d["verdict"] == "unexplained_discrepancy":
         causes = d["unexplained"]["record_causes"]
         assert (ch.PERIOD_REPLAY in causes) == (replay == ch.PERIOD_MEAN)
+
+
+def test_the_user_may_say_how_the_command_is_replayed(cli, tmp_path):
+    """``diagnose --command-hold``: held keeps the held replay on the 1 kHz loop's log, where the
+    record's velocity says otherwise (the report keeps both fits); period_mean replays the mean on
+    the log of a loop at the log's rate; an unknown value is refused by name."""
+    import json
+
+    from rig_records import write_headerless
+
+    cli("rig", "new", "rotary", "--out", tmp_path / "rig", check=True)
+
+    def diagnose(log_every, hold):
+        spec, j, rows, _ = _rows(tmp_path / "rig", log_every)
+        write_headerless(rows, tmp_path / f"log{log_every}.csv")
+        name = f"{hold}{log_every}"
+        proc = cli("diagnose", "--robot", tmp_path / "rig", tmp_path / f"log{log_every}.csv", "--no-header",
+                   "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column", f"u_{j}=2",
+                   "--report", tmp_path / name, "--quiet", "--command-hold", hold, "--effects", "deadband")
+        if proc.returncode:
+            return proc, None
+        d = json.loads((tmp_path / name / "diagnosis.json").read_text())
+        return proc, d["closed_loop_evidence"]["command_hold"]
+
+    _, held = diagnose(20, "held")
+    assert held["replay"] == "held" and held["rule"].startswith("given")
+    assert held["velocity_fit"]["period_mean"] > held["velocity_fit"]["held"]
+    _, mean = diagnose(1, "period_mean")
+    assert mean["replay"] == "period_mean" and mean["rule"].startswith("given")
+    assert mean["velocity_fit"]["period_mean"] < mean["velocity_fit"]["held"]
+    bad, _ = diagnose(1, "zoh")
+    assert bad.returncode == 2 and "--command-hold" in bad.stderr and "Traceback" not in bad.stderr
