@@ -86,8 +86,11 @@ def test_on_a_closed_loop_record_a_gain_on_the_whole_angle_alone_stands_in_for_t
     assert slight.accepted_ok, slight.reasons
     open_loop = with_channels(angle=27.5, velocity=-0.8)
     assert open_loop.accepted_ok, open_loop.reasons
-    assert dc.drift_stand_in({"restarted": -1.0, "velocity": -0.2}) == pytest.approx(0.6)
-    assert dc.drift_stand_in({"restarted": -0.2, "velocity": -0.2}) is None
+    losing = with_channels(angle=-9.4, restarted=3.0, velocity=-31.4)   # loses everywhere but the restarted angle
+    assert not any("stands in for the drift" in r for r in losing.reasons)
+    assert dc.drift_stand_in({"angle": 3.0, "restarted": -1.0, "velocity": -0.2}) == pytest.approx(0.6)
+    assert dc.drift_stand_in({"angle": 3.0, "restarted": -0.2, "velocity": -0.2}) is None
+    assert dc.drift_stand_in({"angle": -0.1, "restarted": -1.0, "velocity": -0.2}) is None
 
 
 def test_a_parameter_on_a_search_bound_rejects_unless_it_is_where_the_effect_vanishes():

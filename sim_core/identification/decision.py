@@ -206,8 +206,8 @@ def drift_stand_in(gain_channels: dict[str, float]) -> float | None:
     bias (a slight asymmetry, an offset) and gain on the whole-record angle only. What the rig does
     shows in the channels that do not integrate, the velocity and the angle restarted from the
     record every few loop time constants: a cause of the rig does not make those worse. Only where
-    the record is scored with the restarted angle (closed loop)."""
-    if "restarted" not in gain_channels:
+    the record is scored with the restarted angle (closed loop), and where the whole-record angle gains."""
+    if "restarted" not in gain_channels or not gain_channels.get("angle", 0.0) > 0.0:
         return None
     loss = -float(np.mean([gain_channels[c] for c in LOCAL_CHANNELS if c in gain_channels]))
     return loss if loss > DRIFT_LOSS_POINTS else None

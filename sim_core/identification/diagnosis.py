@@ -29,7 +29,7 @@ from ..dataset import column_unit
 from ..ingest import pressure_band
 from . import output_error as oe
 from . import (blind_spots, command_hold, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
-               outside_range, parameter_drift, polarity, sensor_disturbance)
+               outside_range, parameter_drift, polarity, sensor_disturbance, step_timing)
 from .calibration import calibrate, is_baseline, plan
 from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
 from .command_hold import CHOICES as HOLD_CHOICES
@@ -44,7 +44,7 @@ from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import autocorrelation, independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
-                        free_list, select, without)
+                        channel_ceilings, free_list, select, without)
 from .signatures import joint_signatures, public
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
@@ -259,6 +259,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     loop = detect_closed_loop(rec, spec)
     hold = _command_hold(hold_choice, loop, rec, est, fast, cal.spec)
+    logged = vrec          # the validation record as logged, before any replay of its command
     if hold is not None:
         loop["command_hold"] = hold
         if hold["replay"] == command_hold.PERIOD_MEAN:
@@ -379,6 +380,18 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                  grid=oe.Problem(rec, targets, n=int(est.n * GRID_SHARE), pressures=est.use_pressures),
                  ranges={fp.key: fp for fp in pl.free if fp.key in nuisance},
                  uncalibrated={c["parameter"]: c["nominal"] for c in cal.changes if c["parameter"] in nuisance})
+    if hold is not None and hold["replay"] == command_hold.PERIOD_MEAN:
+        # where in its period each step came is not in the log: what that alone costs a perfect model
+        # joins the noise in the channels' ceilings (step_timing.py)
+        stepped = [j for j in hold["joints"] if loop["joints"].get(j, {}).get("closed_loop")]
+        noise_only = channel_ceilings(st, vprob.joints)
+        st.replay_misfit = step_timing.misfit(base_fast, logged, vrec, loop, stepped, vprob, vfast, spec)
+        with_steps = channel_ceilings(st, vprob.joints)
+        hold["step_timing"] = {
+            "draws": step_timing.DRAWS, "step_periods": step_timing.counts(logged, loop, stepped, spec),
+            "ceiling_points_lost": {j: {ch: round(noise_only[j][ch] - c, 3) for ch, c in chans.items()}
+                                    for j, chans in with_steps.items()}}
+        timings["step_timing"] = time.perf_counter() - t_start
     def misfit(out) -> bool:
         """Whether a model's residual tests fail on the validation data (``out``: its outputs)."""
         return any(residual_fails(t) for t in residual_tests(vrec, vprob, out, split).values())

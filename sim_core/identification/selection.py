@@ -38,6 +38,7 @@ from functools import partial
 import numpy as np
 
 from . import output_error as oe
+from . import step_timing
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, mean_score, member_evaluations, misses_record,
@@ -79,6 +80,9 @@ class Setting:
     # of them free the calibration can absorb an effect and leave its candidate no way back)
     ranges: dict[str, FreeParameter] = field(default_factory=dict)
     uncalibrated: dict[str, float] = field(default_factory=dict)
+    # (joint, channel) -> expected sum of squares the replay's unknown step instants alone put between a
+    # perfect model and the record (step_timing.py; a period-mean replay), beside the noise's
+    replay_misfit: dict[tuple[str, str], float] = field(default_factory=dict)
 
     def budget(self, n_free: int, n_starts: int = 0, fits: int = 1) -> int:
         """Simulations one fit may spend: ``max_sims``, or what ranking ``n_starts`` starting points
@@ -221,7 +225,8 @@ def score_ceiling(ceilings: dict[str, dict[str, float]]) -> float:
 
 def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, float]]:
     """Per joint, the best NRMSE fit (percent) a perfect model could reach on each validation channel
-    (angle, velocity and, when recorded, the chambers' pressures), given the noise."""
+    (angle, velocity and, when recorded, the chambers' pressures), given the noise and, on a
+    period-mean replay, the steps' unknown instants (``st.replay_misfit``)."""
     from scipy.signal import savgol_coeffs
 
     val = st.val
@@ -243,6 +248,10 @@ def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, floa
                 den = float(np.linalg.norm(y - y.mean())) or 1.0
                 pc.append(100.0 * (1.0 - st.pressure_noise.get(j, 0.0) * math.sqrt(y.size) / den))
             chans["pressure"] = float(np.mean(pc))
+        for ch in chans:
+            extra = st.replay_misfit.get((j, ch))
+            if extra:
+                chans[ch] = step_timing.ceiling(chans[ch], val.meas[(j, "angle" if ch == "restarted" else ch)], extra)
         out[j] = chans
     return out
 
