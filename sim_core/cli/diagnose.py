@@ -47,7 +47,7 @@ def run(args):
     import sys
 
     from ..effects import EFFECTS
-    from ..identification import beyond_range, conditional, detectability, diagnosis, report
+    from ..identification import beyond_range, command_hold, conditional, detectability, diagnosis, report
     from ..identification.decision import THRESHOLD_POINTS
     from ..identification.record import load_record
     from ..ingest import options_from_args
@@ -97,7 +97,7 @@ def run(args):
             print(f"    {line}")
         for name, h in s.get("held_at_default", {}).items():
             print(f"    {name} held at its default {h['value']:g}: the record does not show it apart from {next(iter(s['params']))}")
-        for line in conditional.describe(s):
+        for line in conditional.describe(s) + command_hold.describe(s):
             print(f"    {line}")
         for row in d.detectable:
             if row.get("named") and (row["effect"], row["joint"]) == (s["effect"], s["joint"]):

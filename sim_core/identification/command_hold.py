@@ -85,3 +85,19 @@ def note(hold: dict) -> str:
            f"controller faster than its logger makes it" if hold["rule"].startswith("the calibrated")
            else f"as given (--command-hold; {gain:+.1f} points of velocity fit against holding each sample)")
     return NOTE.format(joints=", ".join(hold["joints"]), why=why)
+
+
+def describe(item: dict) -> list[str]:
+    """The line ``diagnose`` prints under a named effect (a diagnosis.json ``selected`` item) whose
+    values move beyond their 95 % intervals when the command is replayed the other way; [] otherwise."""
+    other = item.get("if_command_hold")
+    if not other:
+        return []
+    moved = {k: v for k, v in other["params"].items()
+             if v is not None and k in item["ci95"] and not item["ci95"][k][0] <= v <= item["ci95"][k][1]}
+    if not moved:
+        return []
+    how = ("held from one logged sample to the next (a controller at the log's rate)" if other["replay"] == HELD
+           else "as the mean of each two logged samples (a controller faster than its log)")
+    return [f"with the command replayed {how}: {', '.join(f'{k}={v:.4g}' for k, v in moved.items())} "
+            f"(the record does not tell which; --command-hold {other['replay']})"]

@@ -259,7 +259,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     loop = detect_closed_loop(rec, spec)
     hold = _command_hold(hold_choice, loop, rec, est, fast, cal.spec)
-    logged = vrec          # the validation record as logged, before any replay of its command
+    logged, logged_est = vrec, rec       # the records as logged, before any replay of their commands
     if hold is not None:
         loop["command_hold"] = hold
         if hold["replay"] == command_hold.PERIOD_MEAN:
@@ -637,6 +637,15 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the calibrated parameters as the extended model has them: refitted beside the named effects, and
     # a recalibration may have identified more of them than the baseline did (extended.toml carries these)
     calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging) if selected else {}
+    if selected and hold is not None:
+        # the record does not tell a controller faster than its log from a valve half a period slower:
+        # what the named values would be under the other replay
+        other = _under_other_hold(hold, logged_est, ext_acc, sel.accepted, keys, st, est, fast.substep)
+        for item, ev in zip(selected, sel.accepted):
+            item["if_command_hold"] = {"replay": other["replay"],
+                                       "params": {fp.key.split(".")[-1]: _num(other["values"].get(fp.key, math.nan))
+                                                  for fp in ev.candidate.free if fp.key in other["values"]}}
+        timings["other_hold"] = time.perf_counter() - t_start
     calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
                                                 {(s["effect"], s["joint"]) for s in selected})
     notes.extend(calib["blind_spots"])
@@ -754,6 +763,19 @@ def _command_hold(choice: str, loop: dict, rec: Record, est: oe.Problem, fast: R
     mean_est = oe.Problem(moving, est.joints, n=est.n, pressures=est.use_pressures)
     return command_hold.choose(est.fits(fast.simulate(model, est.n)),
                                mean_est.fits(Runner(moving, fast.substep).simulate(model, est.n)), joints, choice)
+
+
+def _under_other_hold(hold: dict, logged: Record, model, accepted: list[Evaluation], keys: list[str], st: Setting,
+                      est: oe.Problem, substep: float | None) -> dict:
+    """The final model refitted (a few Gauss-Newton steps from its values, named effects and calibrated
+    parameters free) on the estimation data with the command replayed the other way: held where the
+    diagnosis replayed the period mean, and the reverse. {"replay", "values": key -> value}."""
+    other = command_hold.HELD if hold["replay"] == command_hold.PERIOD_MEAN else command_hold.PERIOD_MEAN
+    rec = logged if other == command_hold.HELD else command_hold.replayed(logged, hold["joints"])
+    free = free_list(model, None, [(e.candidate, e.effect_params()) for e in accepted], keys, st.ranges)
+    res = oe.fit(Runner(rec, substep), oe.Problem(rec, est.joints, n=est.n, pressures=est.use_pressures), model, free,
+                 max_sims=4 * (len(free) + 1) + 1, tol=1e-3, uncertainty=False)
+    return {"replay": other, "values": dict(res.values) if res.ok else {}}
 
 
 def _replay_cause(loop: dict) -> str | None:

@@ -20,7 +20,7 @@ import numpy as np
 from .. import background_import
 from ..dataset import column_unit
 from ..effects import EFFECTS
-from . import beyond_range, conditional
+from . import beyond_range, command_hold, conditional
 from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
@@ -330,7 +330,7 @@ def html_report(d: Diagnosis, data: dict, workers: int = 0) -> str:
                      f"{rows}</table>")
         for k, h in s.get("held_at_default", {}).items():
             parts.append(f"<p><b>Held</b>: {e(k)} = {_fmt(h['value'])}, {e(h['because'])}.</p>")
-        for line in conditional.describe(s):
+        for line in conditional.describe(s) + command_hold.describe(s):
             parts.append(f"<p><b>Conditional</b>: {e(line)}.</p>")
         gc = ", ".join(f"{k} {v:+.2f}" for k, v in s["gain_channels"].items())
         parts.append(f"<p>Gain <b>{s['gain']:+.2f} points</b>{_share(s)} ({e(gc)}); noise spread {s['noise_spread']:.3f}; "
@@ -498,6 +498,12 @@ def _calibration_html(data: dict) -> str:
     loop = data.get("closed_loop_evidence") or {}
     if data.get("closed_loop"):
         parts.append(f"<h2>Closed-loop record</h2><p>{e(loop.get('note', ''))}.</p>")
+    hold = loop.get("command_hold")
+    if hold:
+        fits = hold["velocity_fit"]
+        parts.append(f"<p><b>Command between samples</b>: replayed {e(hold['replay'].replace('_', ' '))} on "
+                     f"{e(', '.join(hold['joints']))} (velocity fit of the calibrated baseline held {fits['held']:.2f} %, "
+                     f"period mean {fits['period_mean']:.2f} %; {e(hold['rule'])}).</p>")
     if loop.get("joints"):
         rows = "".join(f"<tr><td>{e(j)}</td><td>{_fmt(v['correlation'])}</td><td>{_fmt(v['gain'])}</td>"
                        f"<td>{_fmt(v['explained'])}</td><td>{'yes' if v['closed_loop'] else 'no'}</td></tr>"
@@ -581,7 +587,7 @@ def markdown_report(d: Diagnosis, data: dict) -> str:
             lo, hi = s["ci95"][k]
             lines.append(f"- {k} = {_fmt(v)} (95 %: {_fmt(lo)} .. {_fmt(hi)})")
         lines += [f"- {k} {h['because']}" for k, h in s.get("held_at_default", {}).items()]
-        lines += [f"- {line}" for line in conditional.describe(s)]
+        lines += [f"- {line}" for line in conditional.describe(s) + command_hold.describe(s)]
         lines.append(f"- gain {s['gain']:+.2f} points{_share(s)}")
         if s.get("explains_record"):
             lines.append(f"- {s['explains_record']}")
