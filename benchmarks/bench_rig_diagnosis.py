@@ -120,7 +120,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
     named = [s["effect"] for s in d["selected"]]
     # a wrong name the report itself marks ambiguous, with the hidden effect as its runner-up
     flagged = any(s.get("ambiguous") and (s.get("runner_up") or {}).get("effect") == effect for s in d["selected"])
-    error = corrected = None
+    error = corrected = other_error = None
     if params:
         key = next(iter(params))
         hit = [s for s in d["selected"] if s["effect"] == effect]
@@ -132,11 +132,15 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
             if held:
                 corrected = conditional.corrected(hit[0]["params"][key], held, off) / params[key] - 1.0
         right = named == [effect] and error is not None and abs(error) <= TOLERANCE
+        other = hit[0].get("if_command_hold") if hit else None
+        if other and key in other["params"]:     # the value with the command replayed the other way
+            other_error = (other["replay"], other["params"][key] / params[key] - 1.0)
     else:
         right = d["verdict"] == "no_significant_discrepancy"
     return {"template": template, "effect": effect, "seed": seed, "truth": params, "verdict": d["verdict"],
             "named": [(s["effect"], s["params"]) for s in d["selected"]], "error": error, "right": right,
-            "error_given_true_held": corrected,
+            "error_given_true_held": corrected, "error_other_hold": other_error,
+            "command_hold": (d["closed_loop_evidence"].get("command_hold") or {}).get("replay"),
             "ambiguous_with_truth": bool(params) and not right and flagged,
             "fit_before": d["baseline"]["fit"][joint],
             "fit_after": (d.get("extended") or {}).get("fit", {}).get(joint), "seconds": seconds}
@@ -194,6 +198,9 @@ def main():
                 err = "" if c["error"] is None else f" error {100 * c['error']:+.1f} %"
                 if c.get("error_given_true_held") is not None:
                     err += f" ({100 * c['error_given_true_held']:+.1f} % corrected to the true held values)"
+                if c.get("error_other_hold"):
+                    err += f" ({100 * c['error_other_hold'][1]:+.1f} % replayed {c['error_other_hold'][0]})"
+                err += f"; command {c['command_hold']}" if c.get("command_hold") else ""
                 named = ", ".join(f"{e} {', '.join(f'{k}={v:.4g}' for k, v in p.items())}" for e, p in c["named"]) or "-"
                 after = "" if c["fit_after"] is None else f" -> {c['fit_after']:.1f}"
                 amb = f" (ambiguous, runner-up {effect})" if c["ambiguous_with_truth"] else ""
