@@ -47,9 +47,10 @@ NOTE = ("the record was taken in closed loop ({joints}): the command follows -K 
         "The recorded command is what the valve saw and stays the model's input; but a delay shows as phase (a lag "
         "between command and motion, a ringing loop) rather than as dead time after steps, and a deadband as limit "
         "cycles or a standing error around the reference rather than a stall at small commands; the loop's narrow "
-        "excitation widens their intervals. The model holds each logged command until the next sample: log at the "
-        "controller's own rate (a controller faster than its log steps between samples, and the replay misses "
-        "part of every step)")
+        "excitation widens their intervals. Between samples the model holds each logged command, or replays the "
+        "mean of each two where the record fits better that way (a controller faster than its log; see the command "
+        "between samples): log at the controller's own rate (a controller faster than its log steps between "
+        "samples, and no replay knows where)")
 
 # Said beside an unexplained verdict on a closed-loop record: a cause in the record, not in the model
 HELD_REPLAY = ("the record is closed loop and its command is replayed held from one logged sample to the next, which "
