@@ -15,10 +15,10 @@ input and output-error fits are valid; but the loop shapes what the record shows
 as phase (a lag between command and motion, a loop that rings), not as a dead time after steps; a
 deadband appears as limit cycles or a standing error around the reference, not as a stall at small
 commands; and the excitation is as narrow as the loop's bandwidth, so their intervals are wider.
-The command is replayed held from one logged sample to the next, which is what the valve saw only
-when the controller ran at the log's rate: a faster controller's reference steps fall between
-samples, and the replay starts each move up to one period late, an error an open-loop replay
-carries to the end of the record.
+Between two logged samples the command is replayed held, which is what the valve saw only when the
+controller ran at the log's rate, or as the mean of the two, where the record says the controller
+ran faster (command_hold.py); a faster controller's reference steps fall anywhere between samples,
+an error an open-loop replay carries to the end of the record (step_timing.py).
 
 The same replay carries any flow bias the calibration left (a supply or load it could not identify)
 to the end of the record, while the real loop pulled that error back within a few of its time
