@@ -126,3 +126,18 @@ def test_the_user_may_say_how_the_command_is_replayed(cli, tmp_path):
     assert mean["velocity_fit"]["period_mean"] < mean["velocity_fit"]["held"]
     bad, _ = diagnose(1, "zoh")
     assert bad.returncode == 2 and "--command-hold" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_a_named_value_under_the_other_replay_is_said_only_where_the_two_replays_tie_and_it_moves():
+    """A delay of a 1 kHz loop's 50 Hz log: replayed held 50 ms, as period means 60 ms, the two within
+    0.25 points: said. The same value 1 point behind (the record tells the replays apart), or inside
+    the named value's 95 % interval: not said."""
+    item = {"ci95": {"delay": [0.049, 0.051]},
+            "if_command_hold": {"replay": "period_mean", "score_points": -0.25, "params": {"delay": 0.0602}}}
+    said = ch.describe(item)
+    assert len(said) == 1 and "delay=0.0602" in said[0] and "--command-hold period_mean" in said[0]
+    item["if_command_hold"]["score_points"] = -(ch.TIE_POINTS + 0.5)
+    assert ch.describe(item) == []
+    item["if_command_hold"].update(score_points=0.1, params={"delay": 0.0505})
+    assert ch.describe(item) == []
+    assert ch.describe({"ci95": {}}) == []

@@ -91,3 +91,5 @@ def test_a_deadband_on_a_log_slower_than_its_controller_is_named_against_the_cei
     assert lost["angle"] > 1.0 and lost["angle"] > lost["restarted"]   # the whole-record angle integrates it
     assert [s["effect"] for s in d["selected"]] == ["deadband"], (d["selected"], d["unexplained"])
     assert d["selected"][0]["params"]["width"] == pytest.approx(0.8, rel=0.15)
+    other = d["selected"][0]["if_command_hold"]                           # refitted replayed held
+    assert other["replay"] == "held" and other["params"]["width"] == pytest.approx(0.8, rel=0.15)

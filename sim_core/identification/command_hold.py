@@ -28,9 +28,13 @@ from dataclasses import replace
 
 import numpy as np
 
+from .decision import EXCHANGE_POINTS
 from .record import Record
 
 MARGIN_POINTS = 0.25    # velocity fit (points) the period mean must gain over the held replay
+# validation score (points) within which the other replay, refitted, ties with the one used: the
+# exchange pass's margin between two models (decision.EXCHANGE_POINTS)
+TIE_POINTS = EXCHANGE_POINTS
 
 HELD = "held"
 PERIOD_MEAN = "period_mean"
@@ -89,9 +93,11 @@ def note(hold: dict) -> str:
 
 def describe(item: dict) -> list[str]:
     """The line ``diagnose`` prints under a named effect (a diagnosis.json ``selected`` item) whose
-    values move beyond their 95 % intervals when the command is replayed the other way; [] otherwise."""
+    values move beyond their 95 % intervals when the command is replayed the other way, where that
+    replay, refitted, scores within ``TIE_POINTS`` of the one used (the record does not tell the two
+    apart: a delay trades half a period against the hold); [] otherwise."""
     other = item.get("if_command_hold")
-    if not other:
+    if not other or other.get("score_points") is None or other["score_points"] < -TIE_POINTS:
         return []
     moved = {k: v for k, v in other["params"].items()
              if v is not None and k in item["ci95"] and not item["ci95"][k][0] <= v <= item["ci95"][k][1]}

@@ -640,9 +640,10 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if selected and hold is not None:
         # the record does not tell a controller faster than its log from a valve half a period slower:
         # what the named values would be under the other replay
-        other = _under_other_hold(hold, logged_est, ext_acc, sel.accepted, keys, st, est, fast.substep)
+        other = _under_other_hold(hold, logged_est, logged, ext_acc, sel.accepted, keys, st, est, vprob, fast.substep)
+        this = _score(ext_fits, vprob.joints)
         for item, ev in zip(selected, sel.accepted):
-            item["if_command_hold"] = {"replay": other["replay"],
+            item["if_command_hold"] = {"replay": other["replay"], "score_points": _num(other["score"] - this),
                                        "params": {fp.key.split(".")[-1]: _num(other["values"].get(fp.key, math.nan))
                                                   for fp in ev.candidate.free if fp.key in other["values"]}}
         timings["other_hold"] = time.perf_counter() - t_start
@@ -765,17 +766,29 @@ def _command_hold(choice: str, loop: dict, rec: Record, est: oe.Problem, fast: R
                                mean_est.fits(Runner(moving, fast.substep).simulate(model, est.n)), joints, choice)
 
 
-def _under_other_hold(hold: dict, logged: Record, model, accepted: list[Evaluation], keys: list[str], st: Setting,
-                      est: oe.Problem, substep: float | None) -> dict:
+def _under_other_hold(hold: dict, logged: Record, logged_val: Record, model, accepted: list[Evaluation],
+                      keys: list[str], st: Setting, est: oe.Problem, vprob: oe.Problem, substep: float | None) -> dict:
     """The final model refitted (a few Gauss-Newton steps from its values, named effects and calibrated
     parameters free) on the estimation data with the command replayed the other way: held where the
-    diagnosis replayed the period mean, and the reverse. {"replay", "values": key -> value}."""
+    diagnosis replayed the period mean, and the reverse; and its validation score so replayed.
+    ``logged``, ``logged_val``: the estimation and validation records as logged.
+    {"replay", "values": key -> value, "score"}."""
     other = command_hold.HELD if hold["replay"] == command_hold.PERIOD_MEAN else command_hold.PERIOD_MEAN
-    rec = logged if other == command_hold.HELD else command_hold.replayed(logged, hold["joints"])
+
+    def replayed(r: Record) -> Record:
+        return r if other == command_hold.HELD else command_hold.replayed(r, hold["joints"])
+
+    rec = replayed(logged)
+    vrec = rec if logged_val is logged else replayed(logged_val)
     free = free_list(model, None, [(e.candidate, e.effect_params()) for e in accepted], keys, st.ranges)
     res = oe.fit(Runner(rec, substep), oe.Problem(rec, est.joints, n=est.n, pressures=est.use_pressures), model, free,
                  max_sims=4 * (len(free) + 1) + 1, tol=1e-3, uncertainty=False)
-    return {"replay": other, "values": dict(res.values) if res.ok else {}}
+    if not res.ok:
+        return {"replay": other, "values": {}, "score": -math.inf}
+    prob = oe.Problem(vrec, vprob.joints, n=vprob.n, start=vprob.start, pressures=vprob.use_pressures,
+                      restart=vprob.restart)
+    fits = prob.fits(Runner(vrec, substep).simulate(res.spec, prob.n))
+    return {"replay": other, "values": dict(res.values), "score": _score(fits, prob.joints)}
 
 
 def _replay_cause(loop: dict) -> str | None:
