@@ -141,3 +141,13 @@ def test_a_named_value_under_the_other_replay_is_said_only_where_the_two_replays
     item["if_command_hold"].update(score_points=0.1, params={"delay": 0.0505})
     assert ch.describe(item) == []
     assert ch.describe({"ci95": {}}) == []
+
+
+def test_an_unexplained_closed_loop_records_cause_is_the_replay_it_had():
+    from sim_core.identification.closed_loop import HELD_REPLAY
+
+    assert ch.cause({"closed_loop": False, "command_hold": {"replay": ch.PERIOD_MEAN}}) is None
+    assert ch.cause({"closed_loop": True, "command_hold": {"replay": ch.HELD}}) == HELD_REPLAY
+    assert ch.cause({"closed_loop": True}) == HELD_REPLAY
+    assert ch.cause({"closed_loop": True, "command_hold": {"replay": ch.PERIOD_MEAN}}) == ch.PERIOD_REPLAY
+    assert "controller's rate" in ch.PERIOD_REPLAY and "mean of each two logged samples" in ch.PERIOD_REPLAY

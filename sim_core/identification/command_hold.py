@@ -28,6 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .closed_loop import HELD_REPLAY
 from .decision import EXCHANGE_POINTS
 from .record import Record
 
@@ -89,6 +90,17 @@ def note(hold: dict) -> str:
            f"controller faster than its logger makes it" if hold["rule"].startswith("the calibrated")
            else f"as given (--command-hold; {gain:+.1f} points of velocity fit against holding each sample)")
     return NOTE.format(joints=", ".join(hold["joints"]), why=why)
+
+
+def cause(loop: dict) -> str | None:
+    """What an unexplained closed-loop record's replay of its command leaves out, for its causes in
+    the record (``loop``: closed_loop.detect's answer with the ``command_hold`` the diagnosis chose;
+    None: open loop)."""
+    if not loop.get("closed_loop"):
+        return None
+    if loop.get("command_hold", {}).get("replay") == PERIOD_MEAN:
+        return PERIOD_REPLAY
+    return HELD_REPLAY
 
 
 def describe(item: dict) -> list[str]:

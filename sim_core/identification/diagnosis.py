@@ -31,7 +31,7 @@ from . import output_error as oe
 from . import (blind_spots, command_hold, command_null, command_scale, conditional, detectability, held_at_extreme, mains_tone,
                outside_range, parameter_drift, polarity, sensor_disturbance, step_timing)
 from .calibration import calibrate, is_baseline, plan
-from .closed_loop import HELD_REPLAY, detect as detect_closed_loop, validation_window
+from .closed_loop import detect as detect_closed_loop, validation_window
 from .command_hold import CHOICES as HOLD_CHOICES
 from .beyond_range import BeyondRange, stopped_at_an_end
 from .candidates import bank
@@ -581,7 +581,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
              "extended": residual_tests(vrec, vprob, ext_out, split)}
     ceilings = sel.channel_ceilings
     unexplained = _unexplained(vrec, vprob, split, base_fits, ext_fits, ext_out, tests["extended"], sel.ceiling, selected,
-                               ceilings, replay_cause=_replay_cause(loop))
+                               ceilings, replay_cause=command_hold.cause(loop))
     if unexplained and val is None and cal.identified:
         # a rig that changed while it was logged: calibrated again on the validation part alone
         drift = parameter_drift.check(
@@ -591,7 +591,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if drift:
             unexplained["parameter_drift"] = drift
             causes = unexplained["record_causes"]
-            replay = _replay_cause(loop)
+            replay = command_hold.cause(loop)
             causes.insert(causes.index(replay) if replay in causes else len(causes), parameter_drift.cause(drift))
     if unexplained:
         # a sign convention the spec has the other way round (sensor, valve wiring) is no effect of the
@@ -715,7 +715,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
     """decision.unexplained_reasons on the final model, with the residual evidence; {} when the
     model explains the record. ``ceilings``: the channels' noise ceilings per joint. ``replay_cause``:
     on a closed-loop record, how its command was replayed, listed as a cause in the record to check
-    (``record_causes``; :func:`_replay_cause`)."""
+    (``record_causes``; :func:`command_hold.cause`)."""
     joints = vprob.joints
     score = _score(ext_fits, joints)
     channel_fits = {j: {c: v for c, v in ext_fits[j].items() if c != "score"} for j in joints}
@@ -789,15 +789,6 @@ def _under_other_hold(hold: dict, logged: Record, logged_val: Record, model, acc
                       restart=vprob.restart)
     fits = prob.fits(Runner(vrec, substep).simulate(res.spec, prob.n))
     return {"replay": other, "values": dict(res.values), "score": _score(fits, prob.joints)}
-
-
-def _replay_cause(loop: dict) -> str | None:
-    """What an unexplained closed-loop record's replay of its command leaves out (None: open loop)."""
-    if not loop.get("closed_loop"):
-        return None
-    if loop.get("command_hold", {}).get("replay") == command_hold.PERIOD_MEAN:
-        return command_hold.PERIOD_REPLAY
-    return HELD_REPLAY
 
 
 def _pct(v: float):
