@@ -19,7 +19,12 @@ simulated on both, and the period mean is kept when its velocity fit on the clos
 better by ``MARGIN_POINTS`` (the velocity channel, not the angle: a held replay's lag is a local
 error, while an open-loop replay integrates any error into the angle). On the rigs' closed-loop
 records the truth model's velocity fit differs by 1.6 to 10 points between the replays, the right
-one always ahead.
+one always ahead. ``diagnose --command-hold`` gives the choice instead.
+
+A pure delay in the rig trades against the hold: half a period of it makes the held replay of a
+faster controller fit as well as the period mean. So each effect named on a closed-loop record is
+refitted with the command replayed the other way (``if_command_hold``), and where the two tie its
+value there is said beside the named one (:func:`describe`).
 """
 
 from __future__ import annotations

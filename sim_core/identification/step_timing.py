@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from .closed_loop import unsaturated
+from .command_hold import period_mean
 from .record import Record
 
 DRAWS = 12         # replays drawn
@@ -73,9 +74,8 @@ def counts(logged: Record, loop: dict, joints: list[str], spec) -> dict[str, int
 def drawn_commands(U: np.ndarray, steps: dict[int, np.ndarray], rng) -> np.ndarray:
     """The period-mean replay of the logged ``U`` with each step period's mean drawn instead
     (``steps``: column -> its step periods)."""
-    out = np.array(U, dtype=float, copy=True)
+    out = period_mean(U, list(steps))
     for c, ks in steps.items():
-        out[:-1, c] = 0.5 * (U[:-1, c] + U[1:, c])
         phi = rng.uniform(0.0, 1.0, ks.size)
         out[ks, c] = U[ks, c] + phi * (U[ks + 1, c] - U[ks, c])
     return out
