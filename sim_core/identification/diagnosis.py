@@ -258,17 +258,27 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     loop = detect_closed_loop(rec, spec)
-    hold = _command_hold(hold_choice, loop, rec, est, fast, cal.spec)
     logged, logged_est = vrec, rec       # the records as logged, before any replay of their commands
-    if hold is not None:
-        loop["command_hold"] = hold
+    hold_joints = ([j for j, e in loop["joints"].items() if e["closed_loop"]] if hold_choice == command_hold.AUTO
+                   else list(targets))
+    hold = None
+    if hold_joints:
+        # what the valve saw between the logged samples: held, or the period's mean (command_hold.py),
+        # each replay with its own calibration (one calibrated on the other's is biased towards it)
+        moving = command_hold.replayed(rec, hold_joints)
+        m_est = oe.Problem(moving, targets, n=est.n, pressures=est.use_pressures)
+        m_fast = Runner(moving, fast.substep)
+        m_cal = calibrate_side_by_side(m0, m_fast, m_est, free=pl.free, why=pl.why)
+        loop["command_hold"] = hold = command_hold.choose(
+            est.fits(fast.simulate(cal.spec, est.n)), m_est.fits(m_fast.simulate(m_cal.spec, est.n)), hold_joints,
+            hold_choice)
         if hold["replay"] == command_hold.PERIOD_MEAN:
             notes.append(command_hold.note(hold))
-            rec, val = (None if r is None else command_hold.replayed(r, hold["joints"]) for r in (rec, val))
+            rec, val = moving, (None if val is None else command_hold.replayed(val, hold_joints))
             est, vprob, vrec, split = _split(rec, val, targets, [])
-            fast, vfast = Runner(rec, fast.substep), Runner(vrec, fast.substep)
+            fast, vfast = m_fast, Runner(vrec, fast.substep)
             accurate, vaccurate = Runner(rec), Runner(vrec)
-            cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
+            cal = m_cal
         timings["command_hold"] = time.perf_counter() - t_start
     nuisance = {k for k in pl.keys if pl.why.get(k, "").startswith("estimated")}
     base_fast = cal.spec
@@ -750,20 +760,6 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
                                  "model_motion_ratio": round(m["model_motion_ratio"], 3)}
                              for j, m in mains.items()}
     return out
-
-
-def _command_hold(choice: str, loop: dict, rec: Record, est: oe.Problem, fast: Runner, model) -> dict | None:
-    """How the record's commands are replayed between samples (command_hold.choose), from the calibrated
-    baseline ``model`` simulated on both replays: on the joints found in closed loop ('auto'; None when
-    there are none) or, as the user gave it, on every commanded joint."""
-    joints = ([j for j, e in loop["joints"].items() if e["closed_loop"]] if choice == command_hold.AUTO
-              else list(est.joints))
-    if not joints:
-        return None
-    moving = command_hold.replayed(rec, joints)
-    mean_est = oe.Problem(moving, est.joints, n=est.n, pressures=est.use_pressures)
-    return command_hold.choose(est.fits(fast.simulate(model, est.n)),
-                               mean_est.fits(Runner(moving, fast.substep).simulate(model, est.n)), joints, choice)
 
 
 def _under_other_hold(hold: dict, logged: Record, logged_val: Record, model, accepted: list[Evaluation],
