@@ -151,3 +151,13 @@ def test_an_unexplained_closed_loop_records_cause_is_the_replay_it_had():
     assert ch.cause({"closed_loop": True}) == HELD_REPLAY
     assert ch.cause({"closed_loop": True, "command_hold": {"replay": ch.PERIOD_MEAN}}) == ch.PERIOD_REPLAY
     assert "controller's rate" in ch.PERIOD_REPLAY and "mean of each two logged samples" in ch.PERIOD_REPLAY
+
+
+def test_a_baseline_far_off_the_record_keeps_the_held_replay():
+    """A large flow limit the baseline lacks: its velocity misses by 66 points held and 64 as period
+    means, 2.3 points but 3.5 % of the misfit: held. The fast loop's clean rotary: 8.0 -> 5.9 points
+    of misfit, 26 %: the period mean."""
+    far = ch.choose({"a": {"velocity": 33.9}}, {"a": {"velocity": 36.2}}, ["a"])
+    assert far["replay"] == ch.HELD and far["misfit_removed_pct"] == pytest.approx(3.5, abs=0.1)
+    near = ch.choose({"a": {"velocity": 92.0}}, {"a": {"velocity": 94.06}}, ["a"])
+    assert near["replay"] == ch.PERIOD_MEAN and near["misfit_removed_pct"] == pytest.approx(25.8, abs=0.1)

@@ -16,7 +16,7 @@ the second replay holds, over each period, the mean of the samples at its two en
 
 Which of the two the record was taken with is decided by the record: the baseline is calibrated
 on each (one calibrated on the other's replay is biased towards it), and the period mean is kept
-when its velocity fit on the closed-loop joints is better by ``MARGIN_POINTS`` (the velocity channel, not the angle: a held replay's lag is a local
+when its velocity fit on the closed-loop joints is better by ``MARGIN_POINTS`` and by ``SHARE_PCT`` of the held replay's misfit (the velocity channel, not the angle: a held replay's lag is a local
 error, while an open-loop replay integrates any error into the angle). On the rigs' closed-loop
 records the truth model's velocity fit differs by 1.6 to 10 points between the replays, the right
 one always ahead. ``diagnose --command-hold`` gives the choice instead.
@@ -41,6 +41,11 @@ from .record import Record
 # right replay led on the templates' clean logs of a fast loop, over the 0.3 an unnamed effect's
 # misfit moved the two on a log-rate loop's record (the rig's area ratio in the scored matrix)
 MARGIN_POINTS = 1.0
+# ... and the share of the held replay's velocity misfit it must remove: a baseline that lacks a
+# large effect misses the velocity by tens of points, and either replay moves that by a few percent
+# (an area ratio 2 %, a flow limit 3.5 %, a 0.8 V deadband 1 % on the templates and the matrix's rig);
+# the right period mean removed 17-43 % on the templates' clean logs of a fast loop
+SHARE_PCT = 10.0
 # validation score (points) within which the other replay, refitted, ties with the one used: the
 # exchange pass's margin between two models (decision.EXCHANGE_POINTS)
 TIE_POINTS = EXCHANGE_POINTS
@@ -81,11 +86,15 @@ def choose(held: dict[str, dict[str, float]], mean: dict[str, dict[str, float]],
     the user's choice ('held', 'period_mean'), which the fits are then only reported beside."""
     vh = float(np.mean([held[j]["velocity"] for j in joints]))
     vm = float(np.mean([mean[j]["velocity"] for j in joints]))
-    out = {"replay": PERIOD_MEAN if vm - vh >= MARGIN_POINTS else HELD, "joints": list(joints),
-           "velocity_fit": {HELD: round(vh, 3), PERIOD_MEAN: round(vm, 3)}, "margin_points": MARGIN_POINTS,
+    share = 100.0 * (vm - vh) / (100.0 - vh) if vh < 100.0 else 0.0
+    ahead = vm - vh >= MARGIN_POINTS and share >= SHARE_PCT
+    out = {"replay": PERIOD_MEAN if ahead else HELD, "joints": list(joints),
+           "velocity_fit": {HELD: round(vh, 3), PERIOD_MEAN: round(vm, 3)},
+           "misfit_removed_pct": round(share, 1) if np.isfinite(share) else None,
+           "margin_points": MARGIN_POINTS, "share_pct": SHARE_PCT,
            "rule": f"the velocity fit on the closed-loop joints of the baseline calibrated on each replay, the "
                    f"command held and as the mean of each two samples; the mean kept when better by "
-                   f"{MARGIN_POINTS:g} points"}
+                   f"{MARGIN_POINTS:g} points and by {SHARE_PCT:g} % of the held replay's misfit"}
     if given != AUTO:
         out.update(replay=given, rule="given (diagnose --command-hold)")
     return out
