@@ -95,6 +95,10 @@ def test_a_hidden_effect_is_named_with_its_parameter(cli, tmp_path, request, tem
     hit = [s for s in d["selected"] if s["effect"] == effect]
     assert hit and hit[0]["joint"] == j, d["selected"]
     assert hit[0]["params"][name] == pytest.approx(value, rel=0.15)
+    # the controller ran at the log's rate: held, and the period mean, refitted, scores no better
+    assert d["closed_loop_evidence"]["command_hold"]["replay"] == "held"
+    other = hit[0]["if_command_hold"]
+    assert other["replay"] == "period_mean" and name in other["params"] and other["score_points"] < 0.5
 
 
 @pytest.mark.parametrize("template", list(TEMPLATES))
