@@ -54,6 +54,7 @@ HELD = "held"
 PERIOD_MEAN = "period_mean"
 AUTO = "auto"
 CHOICES = (AUTO, HELD, PERIOD_MEAN)    # diagnose --command-hold
+GIVEN_RULE = "given (diagnose --command-hold)"   # the rule of a replay the user chose
 
 NOTE = ("the command is replayed as the mean of each two logged samples, held over the period between them ({joints}): "
         "{why}. How each move started within its period is not in the log; log the command at the controller's rate")
@@ -96,7 +97,7 @@ def choose(held: dict[str, dict[str, float]], mean: dict[str, dict[str, float]],
                    f"command held and as the mean of each two samples; the mean kept when better by "
                    f"{MARGIN_POINTS:g} points and by {SHARE_PCT:g} % of the held replay's misfit"}
     if given != AUTO:
-        out.update(replay=given, rule="given (diagnose --command-hold)")
+        out.update(replay=given, rule=GIVEN_RULE)
     return out
 
 
@@ -105,7 +106,7 @@ def note(hold: dict) -> str:
     fits = hold["velocity_fit"]
     gain = fits[PERIOD_MEAN] - fits[HELD]
     why = (f"the record is fitted {gain:+.1f} points better in velocity that way than holding each sample, as a "
-           f"controller faster than its logger makes it" if hold["rule"].startswith("the velocity fit")
+           f"controller faster than its logger makes it" if hold["rule"] != GIVEN_RULE
            else f"as given (--command-hold; {gain:+.1f} points of velocity fit against holding each sample)")
     return NOTE.format(joints=", ".join(hold["joints"]), why=why)
 

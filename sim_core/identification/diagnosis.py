@@ -258,7 +258,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
 
     cal = calibrate_side_by_side(m0, fast, est, free=pl.free, why=pl.why)
     loop = detect_closed_loop(rec, spec)
-    logged, logged_est = vrec, rec       # the records as logged, before any replay of their commands
+    logged_val, logged_est = vrec, rec   # the records as logged, before any replay of their commands
     hold_joints = ([j for j, e in loop["joints"].items() if e["closed_loop"]] if hold_choice == command_hold.AUTO
                    else list(targets))
     hold = None
@@ -393,12 +393,14 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if hold is not None and hold["replay"] == command_hold.PERIOD_MEAN:
         # where in its period each step came is not in the log: what that alone costs a perfect model
         # joins the noise in the channels' ceilings (step_timing.py)
-        stepped = [j for j in hold["joints"] if loop["joints"].get(j, {}).get("closed_loop")]
+        closed = [j for j in hold["joints"] if loop["joints"].get(j, {}).get("closed_loop")]
+        stepped = step_timing.steps(logged_val, loop, closed, spec)
         noise_only = channel_ceilings(st, vprob.joints)
-        st.replay_misfit = step_timing.misfit(base_fast, logged, vrec, loop, stepped, vprob, vfast, spec)
+        st.replay_misfit = step_timing.misfit(base_fast, logged_val, vrec, stepped, vprob, vfast)
         with_steps = channel_ceilings(st, vprob.joints)
         hold["step_timing"] = {
-            "draws": step_timing.DRAWS, "step_periods": step_timing.counts(logged, loop, stepped, spec),
+            "draws": step_timing.DRAWS,
+            "step_periods": {j: len(stepped.get(logged_val.joint_names.index(j), ())) for j in closed},
             "ceiling_points_lost": {j: {ch: round(noise_only[j][ch] - c, 3) for ch, c in chans.items()}
                                     for j, chans in with_steps.items()}}
         timings["step_timing"] = time.perf_counter() - t_start
@@ -650,7 +652,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if selected and hold is not None:
         # the record does not tell a controller faster than its log from a valve half a period slower:
         # what the named values would be under the other replay
-        other = _under_other_hold(hold, logged_est, logged, ext_acc, sel.accepted, keys, st, est, vprob, fast.substep)
+        other = _under_other_hold(hold, logged_est, logged_val, ext_acc, sel.accepted, keys, st, est, vprob, fast.substep)
         this = _score(ext_fits, vprob.joints)
         for item, ev in zip(selected, sel.accepted):
             item["if_command_hold"] = {"replay": other["replay"], "score_points": _num(other["score"] - this),

@@ -80,8 +80,9 @@ class Setting:
     # of them free the calibration can absorb an effect and leave its candidate no way back)
     ranges: dict[str, FreeParameter] = field(default_factory=dict)
     uncalibrated: dict[str, float] = field(default_factory=dict)
-    # (joint, channel) -> expected sum of squares the replay's unknown step instants alone put between a
-    # perfect model and the record (step_timing.py; a period-mean replay), beside the noise's
+    # (joint, channel) -> sum of squares the replay's unknown step instants alone put between a perfect
+    # model and the record (step_timing.misfit, its 90th percentile over draws; a period-mean replay),
+    # beside the noise's
     replay_misfit: dict[tuple[str, str], float] = field(default_factory=dict)
 
     def budget(self, n_free: int, n_starts: int = 0, fits: int = 1) -> int:

@@ -54,21 +54,16 @@ def step_periods(u: np.ndarray, y: np.ndarray, gain: float, command_range=None) 
     return np.flatnonzero(moving & (dr > med + STEP_MADS * max(mad, 1e-12)))
 
 
-def _steps(logged: Record, loop: dict, joints: list[str], spec) -> dict[int, np.ndarray]:
-    """Command column -> its step periods, per closed-loop joint of ``joints``."""
-    steps = {}
+def steps(logged: Record, loop: dict, joints: list[str], spec) -> dict[int, np.ndarray]:
+    """Command column -> its step periods, per closed-loop joint of ``joints`` (``logged``: the record
+    as logged, held samples; ``loop``: closed_loop.detect's answer)."""
+    found = {}
     for j in joints:
         c = logged.joint_names.index(j)
         ks = step_periods(logged.U[:, c], logged.angles[j], loop["joints"][j]["gain"], spec.joint(j).command_range)
         if ks.size:
-            steps[c] = ks
-    return steps
-
-
-def counts(logged: Record, loop: dict, joints: list[str], spec) -> dict[str, int]:
-    """Per joint of ``joints``: how many periods of the record step."""
-    steps = _steps(logged, loop, joints, spec)
-    return {j: int(steps.get(logged.joint_names.index(j), np.zeros(0)).size) for j in joints}
+            found[c] = ks
+    return found
 
 
 def drawn_commands(U: np.ndarray, steps: dict[int, np.ndarray], rng) -> np.ndarray:
@@ -81,12 +76,12 @@ def drawn_commands(U: np.ndarray, steps: dict[int, np.ndarray], rng) -> np.ndarr
     return out
 
 
-def misfit(model, logged: Record, replayed: Record, loop: dict, joints: list[str], prob, runner, spec) -> dict:
+def misfit(model, logged: Record, replayed: Record, stepped: dict[int, np.ndarray], prob, runner) -> dict:
     """Per (joint, channel) of ``prob`` (the validation problem, on ``replayed``), the sum of squares of
     what the unknown step instants alone change in the model's output (its ``QUANTILE`` over the
-    draws); {} when no period steps. ``logged``: the record as logged (held samples); ``loop``: closed_loop.detect's answer."""
-    steps = _steps(logged, loop, joints, spec)
-    if not steps:
+    draws); {} when no period steps. ``logged``: the record as logged (held samples); ``stepped``: its
+    step periods (:func:`steps`)."""
+    if not stepped:
         return {}
     ref = runner.simulate(model, prob.n)
     if not ref.ok:
@@ -95,7 +90,7 @@ def misfit(model, logged: Record, replayed: Record, loop: dict, joints: list[str
     rng = np.random.default_rng(SEED)
     sums: dict[tuple[str, str], list[float]] = {}
     for _ in range(DRAWS):
-        rec = replace(replayed, U=drawn_commands(logged.U, steps, rng))
+        rec = replace(replayed, U=drawn_commands(logged.U, stepped, rng))
         out = runner.simulate(model, prob.n, rec=rec)
         if not out.ok:
             continue
