@@ -134,7 +134,7 @@ def run_case(work: Path, template: str, effect: str, seed: int, flow: float, sup
         right = named == [effect] and error is not None and abs(error) <= TOLERANCE
         other = hit[0].get("if_command_hold") if hit else None
         if other and key in other["params"]:     # the value with the command replayed the other way
-            other_error = (other["replay"], other["params"][key] / params[key] - 1.0)
+            other_error = (other["replay"], other["params"][key] / params[key] - 1.0, other.get("score_points"))
     else:
         right = d["verdict"] == "no_significant_discrepancy"
     return {"template": template, "effect": effect, "seed": seed, "truth": params, "verdict": d["verdict"],
@@ -199,7 +199,8 @@ def main():
                 if c.get("error_given_true_held") is not None:
                     err += f" ({100 * c['error_given_true_held']:+.1f} % corrected to the true held values)"
                 if c.get("error_other_hold"):
-                    err += f" ({100 * c['error_other_hold'][1]:+.1f} % replayed {c['error_other_hold'][0]})"
+                    how, e, pts = c["error_other_hold"]
+                    err += f" ({100 * e:+.1f} % replayed {how}" + ("" if pts is None else f", {pts:+.2f} points") + ")"
                 err += f"; command {c['command_hold']}" if c.get("command_hold") else ""
                 named = ", ".join(f"{e} {', '.join(f'{k}={v:.4g}' for k, v in p.items())}" for e, p in c["named"]) or "-"
                 after = "" if c["fit_after"] is None else f" -> {c['fit_after']:.1f}"
