@@ -322,6 +322,21 @@ def test_unreachable_address_is_an_error_not_a_hang(records, tmp_path):
     assert proc.returncode == 2 and "--backend ray" in proc.stderr
 
 
+def test_the_fleet_replays_the_command_as_told(records, tmp_path):
+    """``diagnose-fleet --command-hold`` reaches each record's diagnosis (period_mean: every commanded
+    joint, the open-loop records' too, the choice said as given); a wrong value is refused by name."""
+    from sim_core.identification import command_hold
+
+    proc = ok(cli("diagnose-fleet", records[0], "--robot", "hydrolek", "--report", tmp_path / "f", "--workers", 1,
+                  "--command-hold", "period_mean", "--effects", "deadband"))
+    d = json.loads((tmp_path / "f" / records[0].stem / "diagnosis.json").read_text())
+    hold = d["closed_loop_evidence"]["command_hold"]
+    assert hold["replay"] == command_hold.PERIOD_MEAN and hold["rule"] == command_hold.GIVEN_RULE, proc.stdout
+    assert "j2" in hold["joints"]
+    bad = cli("diagnose-fleet", records[0], "--robot", "hydrolek", "--report", tmp_path / "g", "--command-hold", "zoh")
+    assert bad.returncode == 2 and "--command-hold" in bad.stderr and "Traceback" not in bad.stderr
+
+
 def test_input_key_parts_follow_what_changes_a_diagnosis(records, tmp_path):
     from sim_core.fleet import FleetOptions
     from sim_core.fleet.inputs import changed_parts, file_digest, input_key, spec_digest
@@ -341,6 +356,7 @@ def test_input_key_parts_follow_what_changes_a_diagnosis(records, tmp_path):
     assert FleetOptions(spec, ReadOptions(), date_from="stamp").digest() == opts.digest()   # the date is no input
     for changed in (FleetOptions(spec, ReadOptions(), fmt="md"), FleetOptions(spec, ReadOptions(), effects=["deadband"]),
                     FleetOptions(spec, ReadOptions(), initial_pose="data"),
+                    FleetOptions(spec, ReadOptions(), command_hold="period_mean"),
                     FleetOptions(spec, ReadOptions(columns=("q_j2=q_j2:deg",)))):
         assert changed.digest() != opts.digest()
     copy = tmp_path / "copy.csv"

@@ -55,6 +55,16 @@ def add_model_options(p) -> None:
     p.add_argument("--params", metavar="FILE.toml", help="parameter/effect file (e.g. a diagnosis's extended.toml)")
 
 
+def add_command_hold_option(p) -> None:
+    """``--command-hold``: how a record's logged commands are replayed between samples."""
+    p.add_argument("--command-hold", choices=("auto", "held", "period_mean"), default="auto",
+                   help="what the valve saw between two logged commands: held (the controller or signal source ran "
+                        "at the log's rate), period_mean (it ran faster, e.g. a 1 kHz PLC logged at 50 Hz, or a "
+                        "joystick sampled slowly: the mean of each two samples over the period between them, every "
+                        "commanded joint), or auto (default: on the joints found in closed loop, the one that fits "
+                        "the record's velocity better, looked at again with the effects named)")
+
+
 def load_configured_robot(args) -> RobotSpec:
     """Robot spec with --params, then --set, then --effect applied, in that order."""
     spec = load_robot(args.robot)

@@ -3,7 +3,7 @@
 
 def register(sub):
     from ..ingest import add_reading_options
-    from .common import add_model_options
+    from .common import add_command_hold_option, add_model_options
 
     p = sub.add_parser(
         "diagnose",
@@ -31,12 +31,7 @@ def register(sub):
                    help="where the simulation starts: the record's first readings (auto, data: the default; a sensor "
                         "offset is then told from the start pose by what depends on the true pose) or the robot's "
                         "initial positions (spec: the arm is known to start there, e.g. homed)")
-    p.add_argument("--command-hold", choices=("auto", "held", "period_mean"), default="auto",
-                   help="what the valve saw between two logged commands: held (the controller or signal source ran "
-                        "at the log's rate), period_mean (it ran faster, e.g. a 1 kHz PLC logged at 50 Hz, or a "
-                        "joystick sampled slowly: the mean of each two samples over the period between them, every "
-                        "commanded joint), or auto (default: on the joints found in closed loop, the one that fits "
-                        "the record's velocity better)")
+    add_command_hold_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_model_options(p)
     add_reading_options(p)
@@ -105,6 +100,9 @@ def run(args):
                       f"on the model without it)" if row["shows_from"] is not None else
                       "    the estimate of what the record shows does not reach it within its range (estimated, on the "
                       "model without it)")
+    hold = d.closed_loop.get("command_hold")
+    if hold and (hold["replay"] != command_hold.HELD or "revisited" in hold):
+        print(f"  command between samples: {command_hold.said(hold)}")
     for k, r in d.calibration.get("refitted_with_effects", {}).items():
         v, n = r["value"], r["nominal"]
         if n is not None and v is not None and v != n:

@@ -3,7 +3,7 @@
 
 def register(sub):
     from ..ingest import add_reading_options
-    from .common import ROBOT_HELP, add_model_options
+    from .common import ROBOT_HELP, add_command_hold_option, add_model_options
 
     p = sub.add_parser(
         "diagnose-fleet",
@@ -33,6 +33,7 @@ def register(sub):
                    help="the record's date: 'name' (default: a date in the file name, e.g. crane7_2024-03-01.csv or "
                         "20240301T0600) or a file column (header name or 0-based index) whose first value is an ISO 8601 "
                         "date or Unix seconds")
+    add_command_hold_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_model_options(p)
     add_reading_options(p)
@@ -66,7 +67,7 @@ def run(args):
             raise CliError(RAY_MISSING) from None
     spec = load_configured_robot(args)
     opts = FleetOptions(spec, options_from_args(args), initial_pose=args.initial_pose, effects=args.effects,
-                        fmt=args.format, date_from=args.date_from)
+                        fmt=args.format, date_from=args.date_from, command_hold=args.command_hold)
     log = (lambda msg: None) if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
 
     def backend():

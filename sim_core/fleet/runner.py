@@ -39,11 +39,13 @@ class FleetOptions:
     effects: list[str] | None = None
     fmt: str = "html"
     date_from: str = "name"
+    command_hold: str = "auto"         # diagnose --command-hold
 
     def digest(self) -> str:
         """What changes a diagnosis or its files (the date source changes neither)."""
         return options_digest({"reading": self.read.to_dict(), "initial_pose": self.initial_pose,
-                               "effects": sorted(self.effects) if self.effects else None, "format": self.fmt})
+                               "effects": sorted(self.effects) if self.effects else None, "format": self.fmt,
+                               "command_hold": self.command_hold})
 
 
 @dataclass
@@ -187,7 +189,7 @@ def run_fleet(records: list[str | Path], opts: FleetOptions, out_dir: str | Path
                     progress.started(names[i])
                     yield RecordJob(names[i], rec)
 
-            shared = Shared(spec, opts.effects, opts.fmt)
+            shared = Shared(spec, opts.effects, opts.fmt, opts.command_hold)
             outcomes_iter = backend.map(diagnose_record, shared, jobs())
             for o in outcomes_iter:
                 name = o.item.name

@@ -27,6 +27,7 @@ class Shared:
     spec: object          # the configured robot spec (--params, --set, --effect applied)
     effects: list[str] | None
     fmt: str              # report format: html or md
+    command_hold: str = "auto"   # diagnose --command-hold
 
 
 EXPECTED = (ValueError, ArithmeticError)   # bad data, a diverging model: the message says it all
@@ -59,7 +60,8 @@ def diagnose_record(shared: Shared, job: RecordJob) -> dict:
     warm = warm_up(shared.spec)
     t0 = time.perf_counter()
     try:
-        d = diagnosis.run(shared.spec, job.record, None, workers=1, progress=False, effects=shared.effects)
+        d = diagnosis.run(shared.spec, job.record, None, workers=1, progress=False, effects=shared.effects,
+                           command_hold=shared.command_hold)
         with tempfile.TemporaryDirectory(prefix="hydrohil-fleet-") as tmp:
             paths = report.write(d, tmp, shared.spec, fmt=shared.fmt)
             files = {Path(p).name: Path(p).read_bytes() for p in paths.values()}

@@ -504,6 +504,8 @@ def _calibration_html(data: dict) -> str:
         parts.append(f"<p><b>Command between samples</b>: replayed {e(hold['replay'].replace('_', ' '))} on "
                      f"{e(', '.join(hold['joints']))} (velocity fit of the calibrated baseline held {fits['held']:.2f} %, "
                      f"period mean {fits['period_mean']:.2f} %; {e(hold['rule'])}).</p>")
+        if "revisited" in hold:
+            parts.append(f"<p><b>Replay revisited</b>: {e(command_hold.said(hold))}.</p>")
     if loop.get("joints"):
         rows = "".join(f"<tr><td>{e(j)}</td><td>{_fmt(v['correlation'])}</td><td>{_fmt(v['gain'])}</td>"
                        f"<td>{_fmt(v['explained'])}</td><td>{'yes' if v['closed_loop'] else 'no'}</td></tr>"
