@@ -559,8 +559,8 @@ def shown_row(d: dict, case: dict, joint: str) -> dict | None:
             null, top, v = row["null"], row["shows_from"], p[key]
             if top is None:
                 below = True
-            elif null is None:              # vanishes at infinity (a flow limit): the weaker, the larger
-                below = v > top
+            elif null is None:              # vanishes at infinity (a flow limit), or nowhere (line dynamics):
+                below = (v - top) * (row["range_end"] - top) < 0     # beyond top, away from the visible end
             else:
                 below = abs(v - null) < abs(top - null)
             return {"shows_from": top, "range_end": row["range_end"], "hidden_below": below}

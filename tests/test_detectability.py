@@ -44,6 +44,13 @@ def test_a_log_ladder_takes_sixteenths_of_the_range():
     fs = FreeParameter("effects.flow_saturation.j2.max_flow", 1e-6, 1e-3, log=True, null=math.inf)
     assert detectability.rungs(fs)[-1] == pytest.approx(1e-6)
     assert detectability.rungs(FreeParameter("x", 0.0, 1.0, null=None)) == []
+    # no null (line dynamics): over the whole range, from the other bound to the one given
+    ld = FreeParameter("effects.line_dynamics.j2.bulk_modulus_scale", 0.05, 3.0, log=True, null=math.nan)
+    down = detectability.one_way(ld, 0.05)
+    assert len(down) == 16 and down[-1] == pytest.approx(0.05) and down == sorted(down, reverse=True)
+    assert down[0] == pytest.approx(3.0 * (0.05 / 3.0) ** (1 / 16))
+    up = detectability.one_way(ld, 3.0)
+    assert up[-1] == pytest.approx(3.0) and up == sorted(up)
 
 
 def _problem(angle, t):
@@ -88,11 +95,15 @@ def test_every_effect_not_named_has_what_the_record_shows(clean_record):
     case, d, stdout = clean_record
     assert d["verdict"] == "no_significant_discrepancy"
     rows = d["detectable"]["effects"]
-    # every candidate whose effect vanishes at some value of its parameter (line dynamics replaces the
-    # hoses' lumping at any value: no null, no ladder)
-    with_null = {(c.effect, c.joint) for c in bank(load_robot(case.robot), [case.joint]) if detectability.rungs(c.free[0])}
-    assert {(r["effect"], r["joint"]) for r in rows} == with_null & {(c["effect"], c["joint"]) for c in d["candidates"]}
-    assert len(rows) >= len(d["candidates"]) - 1
+    # every candidate: one whose effect vanishes at some value of its parameter from there, one with
+    # no such value (line dynamics replaces the hoses' lumping at any stiffness) from the end of its
+    # range where it shows less
+    assert {(r["effect"], r["joint"]) for r in rows} == {(c["effect"], c["joint"]) for c in d["candidates"]}
+    no_null = [r for r in rows if "from_weaker_end" in r]
+    assert [r["effect"] for r in no_null] == ["line_dynamics"]
+    for r in no_null:
+        assert r["null"] is None
+        assert sorted([r["from_weaker_end"], r["range_end"]]) == pytest.approx([0.05, 3.0])
     for r in rows:
         gains = [x["expected_gain"] for x in r["tested"]]
         if r["shows_from"] is None:

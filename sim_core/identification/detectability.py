@@ -11,7 +11,9 @@ search range), simulated, and the model's calibrated parameters are refitted to 
 order: least squares on the final fit's own Jacobian columns. What the refit cannot take up, with the
 record's noise drawn on top, is the gain a candidate of that magnitude could show; the smallest rung
 whose gain reaches the threshold is what the record shows, none: the record cannot test for the
-effect within the bank's range. An estimate (first order in the calibrated parameters, one noise
+effect within the bank's range. An effect with no value where it vanishes (line dynamics replaces
+the hoses' lumping at any stiffness) is tried at both ends of its range first, and its ladder runs
+from the end where it shows less towards the other. An estimate (first order in the calibrated parameters, one noise
 draw, the first half of the estimation window, where the fits rank their starts; rungs a factor 2
 apart, or 1/16 of a log-scaled range), reported as one.
 """
@@ -44,6 +46,18 @@ def rungs(fp) -> list[float]:
     xn = fp.to_x(null)
     xf = 1.0 if 1.0 - xn >= xn else 0.0
     return [fp.from_x(xn + s * (xf - xn)) for s in (LOG_SHARES if fp.log else LINEAR_SHARES)]
+
+
+def one_way(fp, toward: float) -> list[float]:
+    """A ladder over ``fp``'s whole range in sixteenths of its fit coordinate, from the bound that is
+    not ``toward`` to ``toward`` (that bound excluded, ``toward`` last): for a parameter with no null."""
+    xf = fp.to_x(toward)
+    xn = 1.0 - xf
+    return [fp.from_x(xn + s * (xf - xn)) for s in LOG_SHARES]
+
+
+def has_null(fp) -> bool:
+    return fp.null is not None and not math.isnan(fp.null)
 
 
 def rows_within(full: Problem, part: Problem) -> np.ndarray:
@@ -105,23 +119,37 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
     side by side, each whole in one process (a search's next rung waits only for its own last)."""
     bases = _simulate_all(runner, [g[0].copy() for g in groups], problem.n, side)
     todo = []
+    search = _Search(groups, bases, runner, problem, joints_of, threshold, noise, pressure_noise, restart, todo)
+    weaker: dict[int, tuple] = {}          # todo index -> (the bound a no-null ladder starts from, its gain)
     for gi, (_, _, cands, _) in enumerate(groups):
         for c in cands:
-            values = rungs(c.free[0]) if c.free else []
+            if not c.free:
+                continue
+            fp = c.free[0]
+            if has_null(fp):
+                values = rungs(fp)
+            else:
+                # no value where it vanishes: towards the end of the range where it shows more
+                at = {b: search.gain(gi, c, b) for b in (fp.lower, fp.upper)}
+                g = {b: v if math.isfinite(v) else -math.inf for b, v in at.items()}
+                toward = fp.upper if g[fp.upper] > g[fp.lower] else fp.lower
+                start = fp.lower if toward == fp.upper else fp.upper
+                weaker[len(todo)] = (start, at[start])
+                values = one_way(fp, toward)
             if values:
                 todo.append((gi, c, values))
-    search = _Search(groups, bases, runner, problem, joints_of, threshold, noise, pressure_noise, restart, todo)
     indices = list(range(len(todo)))
     found = side.map(_bisect, indices, hold=search) if side is not None else [search.bisect(i) for i in indices]
     out = []
-    for (gi, c, values), (hi, gains) in zip(todo, found):
+    for i, ((gi, c, values), (hi, gains)) in enumerate(zip(todo, found)):
         fp = c.free[0]
         name = fp.key.split(".")[-1]
-        out.append({
+        first = [{"value": _num(weaker[i][0]), "expected_gain": _num(weaker[i][1])}] if i in weaker else []
+        out.append(({"from_weaker_end": first[0]["value"]} if first else {}) | {
             "effect": c.effect, "joint": c.joint, "parameter": name, "unit": fp.unit, "null": _num(fp.null),
             "named": bool(groups[gi][3]), "range_end": _num(values[-1]),
             "shows_from": None if hi is None else _num(values[hi]),
-            "tested": [{"value": _num(values[k]), "expected_gain": _num(g)} for k, g in sorted(gains.items())],
+            "tested": first + [{"value": _num(values[k]), "expected_gain": _num(g)} for k, g in sorted(gains.items())],
         })
     return out
 

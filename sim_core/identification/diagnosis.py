@@ -128,7 +128,9 @@ class Diagnosis:
             "detectable": {"effects": self.detectable, "threshold_points": THRESHOLD_POINTS,
                            "how": "each effect not named (named: false), put into the final model at magnitudes "
                                   "searched by bisection (shares of the way from where it vanishes to the far end of "
-                                  "its search range, a factor 2 apart, or 1/16 of the range on a log scale), "
+                                  "its search range, a factor 2 apart, or 1/16 of the range on a log scale; an "
+                                  "effect with no such value, from_weaker_end: from the end of its range where it "
+                                  "shows less towards the other, in 1/16 of the range), "
                                   "simulated, the calibrated parameters refitted to it to first order; shows_from: "
                                   "the smallest magnitude whose expected gain reaches the threshold (null: not within "
                                   "the range); each named effect (named: true) the same on the calibrated baseline. "
