@@ -182,6 +182,17 @@ def test_the_replay_is_revisited_only_where_the_named_model_beats_it_beyond_a_ti
     assert second["replay"] == ch.HELD and second["revisited"]["first_replay"] == ch.PERIOD_MEAN
     assert second["rule"] != ch.GIVEN_RULE and "1.90 points" in second["rule"]
     assert ch.revisit(second, 5.0) is None
+    # a record left unexplained is diagnosed again the other way, whatever its named model (none)
+    assert ch.revisit(first, None, unexplained=True) == ch.HELD
+    assert ch.revisit(first, None) is None
+    assert ch.revisit(given, None, unexplained=True) is None
+    assert "left unexplained" in ch.revisited(held, held, None)["rule"]
+    # the better answer is given; an unexplained first gives way only to an explained answer beyond a tie
+    assert ch.adopt(95.0, 95.0, False, False) and not ch.adopt(95.0, 94.9, False, False)
+    assert not ch.adopt(80.0, 99.0, False, True)                  # explained is not given up for unexplained
+    assert ch.adopt(30.0, 30.0 + ch.TIE_POINTS + 0.1, True, False)
+    assert not ch.adopt(30.0, 30.0 + ch.TIE_POINTS, True, False)
+    assert not ch.adopt(30.0, 90.0, True, True)
     assert "+1.9 points better" in ch.said(second) and "period mean" in ch.said(second)
     # the second diagnosis fitted worse: the first answer stands, and says so
     first["revisited"] = {"first_replay": ch.PERIOD_MEAN, "named_model_gain_points": 1.9, "answer": ch.PERIOD_MEAN,
@@ -226,3 +237,23 @@ def test_a_replay_chosen_by_a_baseline_that_lacks_a_flow_limit_is_revisited(tmp_
     assert [s["effect"] for s in d["selected"]] == ["flow_saturation"]
     assert d["selected"][0]["params"]["max_flow"] == pytest.approx(truth, rel=0.05)
     assert "command between samples" in proc.stdout and "revisited" in (tmp_path / "rep" / "report.html").read_text()
+
+
+def test_a_record_left_unexplained_is_diagnosed_again_with_the_other_replay(rotary):
+    """The rotary rig with a 0.8 V deadband under a 1 kHz loop logged at 50 Hz: its baseline, lacking
+    the deadband, fits the velocity as well held (1 % of the misfit removed as period means), and held
+    the record is left unexplained. Diagnosed again as period means the deadband explains it (named
+    3.5 % off) and that answer is given."""
+    spec = load_robot(rotary)
+    j = spec.joint_names[0]
+    i = spec.tree.index(spec.joint(j).dof)
+    rows, _ = closed_loop_record(rotary, hidden=("deadband", {"width": 0.8}),
+                                 off={f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}, seed=1,
+                                 start_offset=0.05 * float(spec.tree.upper[i] - spec.tree.lower[i]), log_every=20)
+    d = run(spec, as_record(spec, rows), progress=False).to_json()
+    hold = d["closed_loop_evidence"]["command_hold"]
+    assert hold["replay"] == ch.PERIOD_MEAN, hold
+    assert hold["revisited"]["first_replay"] == ch.HELD and hold["revisited"]["named_model_gain_points"] is None
+    assert d["verdict"] == "discrepancy" and [s["effect"] for s in d["selected"]] == ["deadband"]
+    assert d["selected"][0]["params"]["width"] == pytest.approx(0.8, rel=0.15)
+    assert any("left unexplained" in n for n in d["data"]["notes"])

@@ -70,6 +70,9 @@ GIVEN_RULE = "given (diagnose --command-hold)"   # the rule of a replay the user
 REVISED_RULE = ("revisited: the model with the named effects, refitted on each replay, fits the validation data "
                 "better with this one by {points:.2f} points (more than the {margin:g} of a tie), where the baseline without them "
                 "preferred the other")
+UNEXPLAINED_RULE = ("revisited: replayed {first}, which the calibrated baseline preferred, the record was left "
+                    "unexplained; diagnosed again this way, it is explained and fits the validation data better by "
+                    "more than a tie")
 
 NOTE = ("the command is replayed as the mean of each two logged samples, held over the period between them ({joints}): "
         "{why}. How each move started within its period is not in the log; log the command at the controller's rate")
@@ -121,33 +124,52 @@ def other(replay: str) -> str:
     return HELD if replay == PERIOD_MEAN else PERIOD_MEAN
 
 
-def revisit(hold: dict, score_points: float) -> str | None:
-    """The replay to diagnose the record again with, where the named model refitted on the other one
-    (``score_points``: its validation score against the one used) beats it by more than ``REVISIT_POINTS`` and
-    the record chose the replay (not the user, not a revisit already); None otherwise."""
-    if hold.get("rule") == GIVEN_RULE or "revisited" in hold or not score_points > REVISIT_POINTS:
+def revisit(hold: dict, score_points: float | None, unexplained: bool = False) -> str | None:
+    """The replay to diagnose the record again with, where the record chose the replay (not the user,
+    not a revisit already) and either the named model refitted on the other one (``score_points``:
+    its validation score against the one used) beats it by more than ``REVISIT_POINTS``, or the record
+    is left ``unexplained``; None otherwise."""
+    if hold.get("rule") == GIVEN_RULE or "revisited" in hold:
         return None
-    return other(hold["replay"])
+    if unexplained or (score_points is not None and score_points > REVISIT_POINTS):
+        return other(hold["replay"])
+    return None
 
 
-def revisited(hold: dict, first: dict, gain: float) -> dict:
+def adopt(first_score: float, second_score: float, first_unexplained: bool, second_unexplained: bool) -> bool:
+    """Whether the second diagnosis (the other replay) is the answer: it fits the validation data at
+    least as well (points), and where the first left the record unexplained, it explains it and
+    fits better by more than a tie; an explained answer is not given up for an unexplained one."""
+    if second_unexplained and not first_unexplained:
+        return False
+    if first_unexplained:
+        return not second_unexplained and second_score > first_score + TIE_POINTS
+    return second_score >= first_score
+
+
+def revisited(hold: dict, first: dict, gain: float | None) -> dict:
     """``hold`` (the second diagnosis's, given the other replay) with the rule that chose it and what
-    the first diagnosis had: its replay and the named model's gain from this replay (points). The
-    validation scores of both answers (``score_points``) and the replay whose answer is given
-    (``answer``) are added once both are known."""
-    out = dict(hold, rule=REVISED_RULE.format(points=gain, margin=REVISIT_POINTS))
-    out["revisited"] = {"first_replay": first["replay"], "named_model_gain_points": round(float(gain), 3)}
+    the first diagnosis had: its replay and the named model's gain from this replay (points; None:
+    the first left the record unexplained). The validation scores of both answers (``score_points``)
+    and the replay whose answer is given (``answer``) are added once both are known."""
+    rule = (REVISED_RULE.format(points=gain, margin=REVISIT_POINTS) if gain is not None
+            else UNEXPLAINED_RULE.format(first=first["replay"].replace("_", " ")))
+    out = dict(hold, rule=rule)
+    out["revisited"] = {"first_replay": first["replay"],
+                        "named_model_gain_points": None if gain is None else round(float(gain), 3)}
     return out
 
 
 def kept_note(hold: dict) -> str:
-    """The note where the second diagnosis, with the other replay, fitted the validation data worse
-    than the first (whose answer is given)."""
+    """The note where the second diagnosis, with the other replay, was not the better answer (the
+    first's is given)."""
     r = hold["revisited"]
     again = other(hold["replay"])
-    return (f"diagnosed again with the command replayed {again.replace('_', ' ')}, where the named model fitted "
-            f"{r['named_model_gain_points']:+.1f} points better; that answer fitted the validation data worse "
-            f"({r['score_points'][again]:.1f} against {r['score_points'][hold['replay']]:.1f} points), so this one stands")
+    why = ("where the named model fitted {:+.1f} points better".format(r["named_model_gain_points"])
+           if r["named_model_gain_points"] is not None else "as the record was left unexplained")
+    return (f"diagnosed again with the command replayed {again.replace('_', ' ')}, {why}; that answer was not the "
+            f"better one ({r['score_points'][again]:.1f} against {r['score_points'][hold['replay']]:.1f} points of "
+            f"validation fit), so this one stands")
 
 
 def note(hold: dict) -> str:
@@ -159,10 +181,12 @@ def note(hold: dict) -> str:
         r = hold["revisited"]
         how = ("held from one logged sample to the next" if hold["replay"] == HELD
                else "as the mean of each two logged samples, held over the period between them")
-        return (f"the command is replayed {how} ({', '.join(hold['joints'])}): the model with the named effects "
-                f"fits the validation data {r['named_model_gain_points']:+.1f} points better that way than replayed "
-                f"{r['first_replay'].replace('_', ' ')}, which the calibrated baseline without them preferred "
-                f"({gain:+.1f} points of velocity fit for the period mean)")
+        first = r["first_replay"].replace("_", " ")
+        why = (f"the model with the named effects fits the validation data {r['named_model_gain_points']:+.1f} points "
+               f"better that way than replayed {first}, which the calibrated baseline without them preferred"
+               if r["named_model_gain_points"] is not None else
+               f"replayed {first}, which the calibrated baseline preferred, the record was left unexplained")
+        return f"the command is replayed {how} ({', '.join(hold['joints'])}): {why} ({gain:+.1f} points of velocity fit for the period mean)"
     why = (f"the record is fitted {gain:+.1f} points better in velocity that way than holding each sample, as a "
            f"controller faster than its logger makes it" if hold["rule"] != GIVEN_RULE
            else f"as given (--command-hold; {gain:+.1f} points of velocity fit against holding each sample)")

@@ -669,22 +669,26 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                                        "params": {fp.key.split(".")[-1]: _num(other["values"].get(fp.key, math.nan))
                                                   for fp in ev.candidate.free if fp.key in other["values"]}}
         timings["other_hold"] = time.perf_counter() - t_start
-        again = command_hold.revisit(hold, other["score"] - this) if hold_choice == command_hold.AUTO else None
+    if hold is not None and hold_choice == command_hold.AUTO:
+        # the baseline chose the replay without the effects named since, or the record is left
+        # unexplained with it: diagnosed again the other way, the better answer is the one given
+        this = _score(ext_fits, vprob.joints)
+        gain = other["score"] - this if selected else None
+        again = command_hold.revisit(hold, gain, unexplained=bool(unexplained))
         if again is not None:
-            # the baseline chose the replay without the effects named since: diagnosed again the other
-            # way, the answer whose model fits the validation data better is the one given
-            log(f"command hold: the named model fits {other['score'] - this:+.2f} points better replayed {again}; "
-                f"diagnosing again that way")
+            log(f"command hold: diagnosing again with the command replayed {again} ("
+                + (f"the named model fits {gain:+.2f} points better so)" if gain is not None else "unexplained)"))
             second = _run(spec, rec0, val0, workers=workers, progress=progress, log=log, effects=effects,
-                          backend=backend, revisit={"first": hold, "gain": other["score"] - this})
+                          backend=backend, revisit={"first": hold, "gain": gain})
             score2 = _score(second.extended_fits, vprob.joints)
             scores = {hold["replay"]: round(this, 3), again: round(score2, 3)}
-            if score2 >= this:
+            if command_hold.adopt(this, score2, bool(unexplained), bool(second.unexplained)):
                 second.closed_loop["command_hold"]["revisited"].update(score_points=scores, answer=again)
                 second.timings["first_pass"] = round(time.perf_counter() - t_start - second.timings["total"], 2)
                 second.timings["total"] = round(time.perf_counter() - t_start, 2)
                 return second
-            hold["revisited"] = {"first_replay": hold["replay"], "named_model_gain_points": round(other["score"] - this, 3),
+            hold["revisited"] = {"first_replay": hold["replay"],
+                                 "named_model_gain_points": None if gain is None else round(gain, 3),
                                  "score_points": scores, "answer": hold["replay"]}
             notes.append(command_hold.kept_note(hold))
             timings["second_pass"] = round(second.timings["total"], 2)
