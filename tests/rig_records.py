@@ -96,6 +96,12 @@ def closed_loop_record(rig_dir, *, hidden: tuple[str, dict] | None, off: dict[st
     return np.array(rows)[::log_every], spec
 
 
+def stroke(spec, joint: str) -> float:
+    """The joint's range between its limits (rad or m): start offsets are shares of it."""
+    i = spec.tree.index(spec.joint(joint).dof)
+    return float(spec.tree.upper[i] - spec.tree.lower[i])
+
+
 def as_record(spec, rows: np.ndarray, source: str = "log"):
     """The logged rows as the diagnosis reads them: the position from the sensor volts by the rig's
     own sensor model (A raw + B), without the CSV round trip of ``hydrohil import``."""

@@ -200,34 +200,23 @@ def test_the_replay_is_revisited_only_where_the_named_model_beats_it_beyond_a_ti
     assert "so this one stands" in ch.said(first) and "93.0 against 95.0" in ch.said(first)
 
 
-def test_a_replay_chosen_by_a_baseline_that_lacks_a_flow_limit_is_revisited(tmp_path):
+def test_a_replay_chosen_by_a_baseline_that_lacks_a_flow_limit_is_revisited(cli, tmp_path):
     """The boom rig under its P loop at the log's rate with a flow limit it was not told of (the
     scored matrix's seed-2 record): its calibrated baseline, lacking the limit, fits the velocity
     better with period means (the limit clips the speeds a step asks for, the means smooth the steps).
     The named model fits better held: the record is diagnosed again held and the limit is named
     within 0.5 % of its value (the period mean's answer: 10 % off)."""
-    import json
-    import subprocess
-    import sys
+    from rig_records import diagnose_log, stroke, write_headerless
 
-    from rig_records import write_headerless
-
-    rig = tmp_path / "rig"
-    subprocess.run([sys.executable, "-m", "sim_core.cli", "rig", "new", "boom", "--out", str(rig)], check=True,
-                   capture_output=True)
-    spec = load_robot(rig)
+    cli("rig", "new", "boom", "--out", tmp_path / "rig", check=True)
+    spec = load_robot(tmp_path / "rig")
     j = spec.joint_names[0]
-    i = spec.tree.index(spec.joint(j).dof)
     truth = 3.93e-4
-    rows, _ = closed_loop_record(rig, hidden=("flow_saturation", {"max_flow": truth}),
+    rows, _ = closed_loop_record(tmp_path / "rig", hidden=("flow_saturation", {"max_flow": truth}),
                                  off={f"joints.{j}.valve.rated_flow": 1.1, "supply.pressure": 0.9}, seed=201,
-                                 duration=60.0, start_offset=0.05 * float(spec.tree.upper[i] - spec.tree.lower[i]))
+                                 duration=60.0, start_offset=0.05 * stroke(spec, j))
     write_headerless(rows, tmp_path / "log.csv")
-    proc = subprocess.run([sys.executable, "-m", "sim_core.cli", "diagnose", "--robot", str(rig), str(tmp_path / "log.csv"),
-                           "--no-header", "--column", "time=0", "--column", f"q_{j}=1:sensor_volts", "--column",
-                           f"u_{j}=2", "--report", str(tmp_path / "rep"), "--quiet"], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    d, printed = diagnose_log(cli, tmp_path, "rep", j)
     hold = d["closed_loop_evidence"]["command_hold"]
     assert hold["replay"] == ch.HELD, hold
     assert hold["revisited"]["first_replay"] == ch.PERIOD_MEAN, hold   # what the baseline alone chose
@@ -236,7 +225,7 @@ def test_a_replay_chosen_by_a_baseline_that_lacks_a_flow_limit_is_revisited(tmp_
     assert scores[ch.HELD] > scores[ch.PERIOD_MEAN]
     assert [s["effect"] for s in d["selected"]] == ["flow_saturation"]
     assert d["selected"][0]["params"]["max_flow"] == pytest.approx(truth, rel=0.05)
-    assert "command between samples" in proc.stdout and "revisited" in (tmp_path / "rep" / "report.html").read_text()
+    assert "command between samples" in printed and "revisited" in (tmp_path / "rep" / "report.html").read_text()
 
 
 def test_a_record_left_unexplained_is_diagnosed_again_with_the_other_replay(rotary):
@@ -244,12 +233,13 @@ def test_a_record_left_unexplained_is_diagnosed_again_with_the_other_replay(rota
     the deadband, fits the velocity as well held (1 % of the misfit removed as period means), and held
     the record is left unexplained. Diagnosed again as period means the deadband explains it (named
     3.5 % off) and that answer is given."""
+    from rig_records import stroke
+
     spec = load_robot(rotary)
     j = spec.joint_names[0]
-    i = spec.tree.index(spec.joint(j).dof)
     rows, _ = closed_loop_record(rotary, hidden=("deadband", {"width": 0.8}),
                                  off={f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}, seed=1,
-                                 start_offset=0.05 * float(spec.tree.upper[i] - spec.tree.lower[i]), log_every=20)
+                                 start_offset=0.05 * stroke(spec, j), log_every=20)
     d = run(spec, as_record(spec, rows), progress=False).to_json()
     hold = d["closed_loop_evidence"]["command_hold"]
     assert hold["replay"] == ch.PERIOD_MEAN, hold
