@@ -167,9 +167,12 @@ def kept_note(hold: dict) -> str:
     again = other(hold["replay"])
     why = ("where the named model fitted {:+.1f} points better".format(r["named_model_gain_points"])
            if r["named_model_gain_points"] is not None else "as the record was left unexplained")
-    return (f"diagnosed again with the command replayed {again.replace('_', ' ')}, {why}; that answer was not the "
-            f"better one ({r['score_points'][again]:.1f} against {r['score_points'][hold['replay']]:.1f} points of "
-            f"validation fit), so this one stands")
+    said = (r.get("verdicts") or {}).get(again)
+    return (f"diagnosed again with the command replayed {again.replace('_', ' ')}, {why}; that answer"
+            + (f" ({said})" if said else "") + f" was not the better one ({r['score_points'][again]:.1f} against "
+            f"{r['score_points'][hold['replay']]:.1f} points of validation fit"
+            + (f"; an unexplained record gives way only to an answer that explains it and fits better by more than "
+               f"{TIE_POINTS:g}" if r["named_model_gain_points"] is None else "") + "), so this one stands")
 
 
 def note(hold: dict) -> str:

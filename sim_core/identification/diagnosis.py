@@ -682,14 +682,16 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                           backend=backend, revisit={"first": hold, "gain": gain})
             score2 = _score(second.extended_fits, vprob.joints)
             scores = {hold["replay"]: round(this, 3), again: round(score2, 3)}
+            verdicts = {hold["replay"]: verdict(bool(selected), bool(unexplained)), again: second.verdict}
             if command_hold.adopt(this, score2, bool(unexplained), bool(second.unexplained)):
-                second.closed_loop["command_hold"]["revisited"].update(score_points=scores, answer=again)
+                second.closed_loop["command_hold"]["revisited"].update(score_points=scores, verdicts=verdicts,
+                                                                       answer=again)
                 second.timings["first_pass"] = round(time.perf_counter() - t_start - second.timings["total"], 2)
                 second.timings["total"] = round(time.perf_counter() - t_start, 2)
                 return second
             hold["revisited"] = {"first_replay": hold["replay"],
                                  "named_model_gain_points": None if gain is None else round(gain, 3),
-                                 "score_points": scores, "answer": hold["replay"]}
+                                 "score_points": scores, "verdicts": verdicts, "answer": hold["replay"]}
             notes.append(command_hold.kept_note(hold))
             timings["second_pass"] = round(second.timings["total"], 2)
     calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
