@@ -172,7 +172,9 @@ def kept_note(hold: dict) -> str:
             + (f" ({said})" if said else "") + f" was not the better one ({r['score_points'][again]:.1f} against "
             f"{r['score_points'][hold['replay']]:.1f} points of validation fit"
             + (f"; an unexplained record gives way only to an answer that explains it and fits better by more than "
-               f"{TIE_POINTS:g}" if r["named_model_gain_points"] is None else "") + "), so this one stands")
+               f"{TIE_POINTS:g}" if r["named_model_gain_points"] is None else "") + f"), so this one stands; where you know "
+            f"the controller ran {'faster than' if again == PERIOD_MEAN else 'at'} the log's rate, --command-hold "
+            f"{again} gives that answer")
 
 
 def note(hold: dict) -> str:
