@@ -182,8 +182,14 @@ def test_the_replay_is_revisited_only_where_the_named_model_beats_it_beyond_a_ti
     assert second["replay"] == ch.HELD and second["revisited"]["first_replay"] == ch.PERIOD_MEAN
     assert second["rule"] != ch.GIVEN_RULE and "1.90 points" in second["rule"]
     assert ch.revisit(second, 5.0) is None
-    # a record left unexplained is diagnosed again the other way, whatever its named model (none)
-    assert ch.revisit(first, None, unexplained=True) == ch.HELD
+    # a record left unexplained is diagnosed again the other way where the baseline fitted that way at
+    # least as well (the choice fell short of its margin or share), not where it fitted it worse
+    assert ch.revisit(held, None, unexplained=True) == ch.PERIOD_MEAN
+    short = ch.choose({"a": {"velocity": 49.2}}, {"a": {"velocity": 49.7}}, ["a"])    # 1 % of the misfit
+    assert short["replay"] == ch.HELD and ch.revisit(short, None, unexplained=True) == ch.PERIOD_MEAN
+    worse = ch.choose({"a": {"velocity": 94.4}}, {"a": {"velocity": 21.3}}, ["a"])    # a command in another scale
+    assert ch.revisit(worse, None, unexplained=True) is None
+    assert ch.revisit(first, None, unexplained=True) is None      # chosen by its margin: held fitted worse
     assert ch.revisit(first, None) is None
     assert ch.revisit(given, None, unexplained=True) is None
     assert "left unexplained" in ch.revisited(held, held, None)["rule"]

@@ -128,11 +128,19 @@ def revisit(hold: dict, score_points: float | None, unexplained: bool = False) -
     """The replay to diagnose the record again with, where the record chose the replay (not the user,
     not a revisit already) and either the named model refitted on the other one (``score_points``:
     its validation score against the one used) beats it by more than ``REVISIT_POINTS``, or the record
-    is left ``unexplained``; None otherwise."""
+    is left ``unexplained`` where the calibrated baseline fitted the velocity at least as well on the
+    other (the choice fell short of its margin or share: the record did not decide it); None
+    otherwise. A baseline that fitted the other replay worse has said which the record was taken
+    with: an unexplained record then has its cause elsewhere (a command logged in another scale
+    is left unexplained held and absorbed by a calibration gone astray as period means)."""
     if hold.get("rule") == GIVEN_RULE or "revisited" in hold:
         return None
-    if unexplained or (score_points is not None and score_points > REVISIT_POINTS):
-        return other(hold["replay"])
+    there = other(hold["replay"])
+    fits = hold["velocity_fit"]
+    if unexplained and fits[there] >= fits[hold["replay"]]:
+        return there
+    if score_points is not None and score_points > REVISIT_POINTS:
+        return there
     return None
 
 
