@@ -182,14 +182,18 @@ def test_the_replay_is_revisited_only_where_the_named_model_beats_it_beyond_a_ti
     assert second["replay"] == ch.HELD and second["revisited"]["first_replay"] == ch.PERIOD_MEAN
     assert second["rule"] != ch.GIVEN_RULE and "1.90 points" in second["rule"]
     assert ch.revisit(second, 5.0) is None
-    # a record left unexplained is diagnosed again the other way where the baseline fitted that way at
-    # least as well (the choice fell short of its margin or share), not where it fitted it worse
+    # a record left unexplained is diagnosed again the other way unless the baseline missed the velocity
+    # there by more than FAR_RATIO times the misfit of the replay used
     assert ch.revisit(held, None, unexplained=True) == ch.PERIOD_MEAN
     short = ch.choose({"a": {"velocity": 49.2}}, {"a": {"velocity": 49.7}}, ["a"])    # 1 % of the misfit
     assert short["replay"] == ch.HELD and ch.revisit(short, None, unexplained=True) == ch.PERIOD_MEAN
+    lag = ch.choose({"a": {"velocity": 60.8}}, {"a": {"velocity": 53.8}}, ["a"])      # a delay it lacks: 1.2 x
+    assert ch.revisit(lag, None, unexplained=True) == ch.PERIOD_MEAN
     worse = ch.choose({"a": {"velocity": 94.4}}, {"a": {"velocity": 21.3}}, ["a"])    # a command in another scale
     assert ch.revisit(worse, None, unexplained=True) is None
-    assert ch.revisit(first, None, unexplained=True) is None      # chosen by its margin: held fitted worse
+    edge = ch.choose({"a": {"velocity": 90.0}}, {"a": {"velocity": 100.0 - 10.0 * ch.FAR_RATIO - 0.1}}, ["a"])
+    assert ch.revisit(edge, None, unexplained=True) is None
+    assert ch.revisit(first, None, unexplained=True) == ch.HELD   # 88 against 50 points of misfit
     assert ch.revisit(first, None) is None
     assert ch.revisit(given, None, unexplained=True) is None
     assert "left unexplained" in ch.revisited(held, held, None)["rule"]
