@@ -167,10 +167,13 @@ def revisited(hold: dict, first: dict, gain: float | None) -> dict:
     and the replay whose answer is given (``answer``) are added once both are known."""
     rule = (REVISED_RULE.format(points=gain, margin=REVISIT_POINTS) if gain is not None
             else UNEXPLAINED_RULE.format(first=first["replay"].replace("_", " ")))
-    out = dict(hold, rule=rule)
-    out["revisited"] = {"first_replay": first["replay"],
-                        "named_model_gain_points": None if gain is None else round(float(gain), 3)}
-    return out
+    return dict(hold, rule=rule, revisited=revisit_entry(first["replay"], gain))
+
+
+def revisit_entry(first_replay: str, gain: float | None) -> dict:
+    """``revisited``'s first keys: the first diagnosis's replay and its named model's gain from the
+    other one (points; None: that diagnosis left the record unexplained)."""
+    return {"first_replay": first_replay, "named_model_gain_points": None if gain is None else round(float(gain), 3)}
 
 
 def kept_note(hold: dict) -> str:

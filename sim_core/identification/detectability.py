@@ -40,10 +40,9 @@ def rungs(fp) -> list[float]:
     """The ladder's values of ``fp`` (a candidate's first free parameter), nearest the null first:
     from its null towards the search bound farther from it in the fit coordinate. [] where the
     parameter has no null."""
-    null = fp.null
-    if null is None or math.isnan(null):
+    if not has_null(fp):
         return []
-    xn = fp.to_x(null)
+    xn = fp.to_x(fp.null)
     xf = 1.0 if 1.0 - xn >= xn else 0.0
     return [fp.from_x(xn + s * (xf - xn)) for s in (LOG_SHARES if fp.log else LINEAR_SHARES)]
 
@@ -57,6 +56,7 @@ def one_way(fp, toward: float) -> list[float]:
 
 
 def has_null(fp) -> bool:
+    """Whether ``fp`` has a value where its effect vanishes (infinity counts: a flow limit's)."""
     return fp.null is not None and not math.isnan(fp.null)
 
 

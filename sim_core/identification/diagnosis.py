@@ -659,11 +659,11 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     # the calibrated parameters as the extended model has them: refitted beside the named effects, and
     # a recalibration may have identified more of them than the baseline did (extended.toml carries these)
     calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging) if selected else {}
+    this = _score(ext_fits, vprob.joints)     # the answer's validation score (points)
     if selected and hold is not None:
         # the record does not tell a controller faster than its log from a valve half a period slower:
         # what the named values would be under the other replay
         other = _under_other_hold(hold, logged_est, logged_val, ext_acc, sel.accepted, keys, st, est, vprob, fast.substep)
-        this = _score(ext_fits, vprob.joints)
         for item, ev in zip(selected, sel.accepted):
             item["if_command_hold"] = {"replay": other["replay"], "score_points": _num(other["score"] - this),
                                        "params": {fp.key.split(".")[-1]: _num(other["values"].get(fp.key, math.nan))
@@ -672,7 +672,6 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     if hold is not None and hold_choice == command_hold.AUTO:
         # the baseline chose the replay without the effects named since, or the record is left
         # unexplained with it: diagnosed again the other way, the better answer is the one given
-        this = _score(ext_fits, vprob.joints)
         gain = other["score"] - this if selected else None
         again = command_hold.revisit(hold, gain, unexplained=bool(unexplained))
         if again is not None:
@@ -689,9 +688,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
                 second.timings["first_pass"] = round(time.perf_counter() - t_start - second.timings["total"], 2)
                 second.timings["total"] = round(time.perf_counter() - t_start, 2)
                 return second
-            hold["revisited"] = {"first_replay": hold["replay"],
-                                 "named_model_gain_points": None if gain is None else round(gain, 3),
-                                 "score_points": scores, "verdicts": verdicts, "answer": hold["replay"]}
+            hold["revisited"] = command_hold.revisit_entry(hold["replay"], gain) | {
+                "score_points": scores, "verdicts": verdicts, "answer": hold["replay"]}
             notes.append(command_hold.kept_note(hold))
             timings["second_pass"] = round(second.timings["total"], 2)
     calib["blind_spots"] = blind_spots.friction(pl.keys, targets, rec.has_pressures, effects,
