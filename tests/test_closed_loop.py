@@ -8,7 +8,11 @@ import pytest
 
 from sim_core.dataset import write_csv
 from sim_core.identification import output_error as oe
-from sim_core.identification.closed_loop import CORRELATION_LIMIT, RESTART_TAUS, joint_evidence, time_constant
+from sim_core.identification.closed_loop import (CORRELATION_LIMIT, RESTART_TAUS, _correlated, joint_evidence, time_constant,
+                                                 unsaturated)
+from sim_core.kernel import layout as L
+from sim_core.plant import Plant
+from sim_core.simulator import Simulator
 from sim_core.identification.record import Record
 from sim_core.model.spec import load_robot
 
@@ -37,6 +41,59 @@ def test_an_open_loop_prbs_record_is_not(robot, joint):
         noisy = u + rng.normal(0.0, 0.05, u.size)
         ev = joint_evidence(noisy, y, spec.joint(joint).command_range)
         assert not ev["closed_loop"] and abs(ev["correlation"]) < 0.2
+
+
+@pytest.mark.parametrize("robot,joint,kp", [("hydrolek", "j2", 15.0), ("hydrolek", "j2", 60.0), ("harvester", "boom", 20.0)])
+@pytest.mark.parametrize("hz", [0.1, 0.3])
+def test_a_loop_tracking_a_moving_set_point_is_closed_loop(robot, joint, kp, hz):
+    """A sine to track: the command's increments follow the set point's, which the joint follows too,
+    so the increments alone do not show the loop; their second differences do."""
+    spec = load_robot(robot)
+    q0 = float(spec.joint(joint).settings["initial_position"])
+    t = np.arange(30 * 50 + 1) / 50.0
+    cols = closed_loop_columns(spec, joint, kp=kp, duration=30.0, seed=2, reference=q0 + 0.25 * np.sin(2 * np.pi * hz * t))
+    u, y = cols[f"u_{joint}"], cols[f"q_{joint}"]
+    inside = unsaturated(u, spec.joint(joint).command_range)
+    assert not _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], 1)["closed_loop"]   # increments alone
+    ev = joint_evidence(u, y, spec.joint(joint).command_range, cols["time"])
+    assert ev["closed_loop"] and ev["differences"] == 2 and ev["correlation"] <= CORRELATION_LIMIT
+    assert ev["lag_samples"] == 0 and ev["gain"] == pytest.approx(kp, rel=0.15)
+
+
+def test_a_moving_set_point_on_an_uneven_clock_is_found_by_differences_in_time():
+    """Samples 10 % uneven, a P loop reading a noisy sensor around an ideal valve, tracking a 0.3 Hz
+    sine: the set point moves by more or less per sample, which second differences per sample read as
+    command changes the reading did not cause; divided by the time they do not."""
+    rng = np.random.default_rng(4)
+    n, kp = 3000, 100.0
+    t = np.cumsum(0.02 * (1.0 + rng.uniform(-0.1, 0.1, n)))
+    r = 0.3 * np.sin(2 * np.pi * 0.3 * t)
+    q, y, u = np.zeros(n), np.zeros(n), np.zeros(n)
+    for k in range(n):
+        y[k] = q[k] + rng.normal(0, 1e-4)                     # what the controller reads and the log keeps
+        u[k] = np.clip(kp * (r[k] - y[k]), -10, 10)
+        if k < n - 1:
+            q[k + 1] = q[k] + 0.03 * (t[k + 1] - t[k]) * u[k]
+    even = joint_evidence(u, y, (-10.0, 10.0))               # no clock: per sample only
+    ev = joint_evidence(u, y, (-10.0, 10.0), t)
+    assert not even["closed_loop"]
+    assert ev["closed_loop"] and ev["differences"] == 2 and ev["lag_samples"] == 0
+    assert 0.0 < ev["gain"] <= 1.1 * kp
+
+
+@pytest.mark.parametrize("robot,joint", [("hydrolek", "j2"), ("harvester", "boom")])
+def test_an_open_loop_multisine_is_not(robot, joint):
+    """A smooth exogenous command: neither its increments nor its second differences follow the reading."""
+    spec = load_robot(robot)
+    rng = np.random.default_rng(3)
+    t = np.arange(1500) / 50.0
+    us = sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in (0.15, 0.35, 0.7, 1.3, 2.1))
+    U = np.zeros((t.size, len(spec.joints)))
+    a = spec.joint_names.index(joint)
+    U[:, a] = 4.5 * us / np.abs(us).max()
+    y = Simulator(Plant(spec).create_context(seed=3)).run(t, U).act[:, a, L.YA_ANGLE]
+    ev = joint_evidence(U[:, a], y, spec.joint(joint).command_range, t)
+    assert not ev["closed_loop"]
 
 
 def test_feedback_one_sample_late_and_saturated():

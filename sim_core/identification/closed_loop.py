@@ -7,8 +7,17 @@ not follow the sensor's noise, and a signal and its own derivative are uncorrela
 therefore correlates the command's increments with the reading's, at lags 0 to ``MAX_LAG`` samples
 (a controller that logs the reading one sample before it acts), leaving out the largest command
 jumps (reference steps, PRBS switches) and samples at the command limits (saturation cuts the loop).
+A reference that moves all the time (a sine to track, a ramp) puts its own increments into both,
+``du = K (dr - dy)`` with ``dy`` mostly the joint following ``dr``: the noise's share of ``dy`` is then
+small and the correlation weak. So where the increments do not show feedback, the same test runs on
+second differences, sample to sample and divided by time (uneven steps move the set point by uneven
+amounts, which the division takes out; the plant's own motion over a longer step is the loop's to
+answer, which it keeps), and the more negative of the two counts: a smooth reference and the motion
+that follows it nearly vanish in second differences, a sensor's noise does not, and in open loop the
+command's and the reading's second differences stay as uncorrelated as their increments.
 Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
-and the share of the command's increments ``-K dy`` explains.
+the share of the command's changes ``-K dy`` explains, and which differences showed it
+(``differences``: 1 or 2).
 
 What it means for the diagnosis: the recorded command is what the valve saw, so it stays the model's
 input and output-error fits are valid; but the loop shapes what the record shows. A delay appears
@@ -68,20 +77,14 @@ def unsaturated(u: np.ndarray, command_range: tuple[float, float] | None) -> np.
     return (u > lo + span) & (u < hi - span)
 
 
-def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
-    """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
-    the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains."""
-    u, y = np.asarray(u, float), np.asarray(y, float)
-    none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False}
-    if u.size < 10:
-        return none
-    du, dy = np.diff(u), np.diff(y)
-    inside = unsaturated(u, command_range)
-    keep = inside[1:] & inside[:-1]
+def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, differences: int) -> dict:
+    """The most negative correlation of ``du`` with ``dy`` over lags 0..MAX_LAG (``du`` that many
+    samples later), over ``keep``'s samples without the largest command changes."""
+    best = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
+            "differences": differences}
     big = np.abs(du)
     if keep.any():
-        keep &= big <= np.quantile(big[keep], JUMP_QUANTILE)
-    best = none
+        keep = keep & (big <= np.quantile(big[keep], JUMP_QUANTILE))
     for lag in range(MAX_LAG + 1):
         a = du[lag:][keep[lag:]]
         b = dy[: dy.size - lag][keep[lag:]]
@@ -89,13 +92,44 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
             continue
         a, b = a - a.mean(), b - b.mean()
         sa, sb = float(np.sqrt(a @ a)), float(np.sqrt(b @ b))
-        if sa <= 0 or sb <= 0:
+        if sa <= 0 or sb <= 0 or not (math.isfinite(sa) and math.isfinite(sb)):
             continue
         rho = float(a @ b) / (sa * sb)
         if rho < best["correlation"]:
             best = {"correlation": round(rho, 4), "gain": -float(a @ b) / float(b @ b), "lag_samples": lag,
-                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT}
+                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT,
+                    "differences": differences}
     return best
+
+
+def second_divided(t: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Second divided differences of ``f`` over time ``t`` (half its second derivative, in its unit per
+    s^2): zero for any ``f`` linear in time however uneven the steps."""
+    return np.diff(np.diff(f) / np.diff(t)) / (t[2:] - t[:-2])
+
+
+def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
+                   t: np.ndarray | None = None) -> dict:
+    """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
+    the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains; where
+    that shows no feedback, the same of their second differences, sample to sample and divided by
+    time ``t`` (s), whichever shows more: a smooth reference masks neither."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
+            "differences": 1}
+    if u.size < 12:
+        return none
+    inside = unsaturated(u, command_range)
+    first = _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], 1)
+    if first["closed_loop"]:
+        return first
+    keep = inside[2:] & inside[1:-1] & inside[:-2]
+    second = [_correlated(np.diff(u, 2), np.diff(y, 2), keep, 2)]
+    if t is not None and np.all(np.diff(np.asarray(t, float)) > 0):
+        t = np.asarray(t, float)
+        second.append(_correlated(second_divided(t, u), second_divided(t, y), keep, 2))
+    best = min(second, key=lambda e: e["correlation"])
+    return best if best["closed_loop"] else first
 
 
 def direction(u: np.ndarray, y: np.ndarray, dt: float, command_range: tuple[float, float] | None = None) -> dict:
@@ -149,14 +183,15 @@ def detect(rec: Record, spec=None) -> dict:
     """Per commanded, measured joint: the evidence; ``closed_loop`` when any joint shows feedback,
     with the note for the report."""
     ranges = {j: (spec.joint(j).command_range if spec is not None else None) for j in rec.targets}
-    joints = {j: joint_evidence(rec.u(j), rec.angles[j], ranges[j]) for j in rec.targets}
+    joints = {j: joint_evidence(rec.u(j), rec.angles[j], ranges[j], rec.time) for j in rec.targets}
     for j, e in joints.items():
         if e["closed_loop"]:
             e["time_constant_s"] = time_constant(rec.u(j), rec.angles[j], rec.dt, e["gain"], ranges[j])
     closed = [j for j, e in joints.items() if e["closed_loop"]]
     out = {"closed_loop": bool(closed), "joints": joints,
            "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "
-                   f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}"}
+                   f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}, "
+                   f"or else of their second differences, per sample or divided by time (a reference that moves all the time)"}
     if closed:
         out["note"] = NOTE.format(joints=", ".join(f"{j}: correlation {joints[j]['correlation']:+.2f}, K = "
                                                    f"{joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
