@@ -10,14 +10,13 @@ jumps (reference steps, PRBS switches) and samples at the command limits (satura
 A reference that moves all the time (a sine to track, a ramp) puts its own increments into both,
 ``du = K (dr - dy)`` with ``dy`` mostly the joint following ``dr``: the noise's share of ``dy`` is then
 small and the correlation weak. So where the increments do not show feedback, the same test runs on
-second differences, sample to sample and divided by time (uneven steps move the set point by uneven
-amounts, which the division takes out; the plant's own motion over a longer step is the loop's to
-answer, which it keeps), and the more negative of the two counts: a smooth reference and the motion
-that follows it nearly vanish in second differences, a sensor's noise does not, and in open loop the
-command's and the reading's second differences stay as uncorrelated as their increments.
+what is left of each signal after its local quadratic in time over ``LOCAL_SAMPLES`` samples (fitted
+at each sample's own time, so uneven steps are allowed): a smooth reference and the motion that
+follows it vanish there, a sensor's noise and the command's answer to it do not, and in open loop the
+command's and the reading's residuals stay as uncorrelated as their increments.
 Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
-the share of the command's changes ``-K dy`` explains, and which differences showed it
-(``differences``: 1 or 2).
+the share of the command's changes ``-K dy`` explains, and which test showed it (``test``:
+``increments`` or ``local_residuals``).
 
 What it means for the diagnosis: the recorded command is what the valve saw, so it stays the model's
 input and output-error fits are valid; but the loop shapes what the record shows. A delay appears
@@ -50,6 +49,7 @@ from .record import Record
 MAX_LAG = 2               # samples between the reading and the command it causes
 JUMP_QUANTILE = 0.95      # command increments above this quantile of |du| are left out (steps, switches)
 CORRELATION_LIMIT = -0.5  # correlation of du and dy at or below this: feedback
+LOCAL_SAMPLES = 7         # samples of the local quadratic whose residual the second test correlates
 RESTART_TAUS = 4.0        # loop time constants per validation window (an error decays to 2 % in 4)
 
 NOTE = ("the record was taken in closed loop ({joints}): the command follows -K (q - r) with a smooth reference r. "
@@ -77,11 +77,10 @@ def unsaturated(u: np.ndarray, command_range: tuple[float, float] | None) -> np.
     return (u > lo + span) & (u < hi - span)
 
 
-def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, differences: int) -> dict:
+def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, test: str) -> dict:
     """The most negative correlation of ``du`` with ``dy`` over lags 0..MAX_LAG (``du`` that many
     samples later), over ``keep``'s samples without the largest command changes."""
-    best = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
-            "differences": differences}
+    best = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False, "test": test}
     big = np.abs(du)
     if keep.any():
         keep = keep & (big <= np.quantile(big[keep], JUMP_QUANTILE))
@@ -97,39 +96,46 @@ def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, differences: i
         rho = float(a @ b) / (sa * sb)
         if rho < best["correlation"]:
             best = {"correlation": round(rho, 4), "gain": -float(a @ b) / float(b @ b), "lag_samples": lag,
-                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT,
-                    "differences": differences}
+                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT, "test": test}
     return best
 
 
-def second_divided(t: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Second divided differences of ``f`` over time ``t`` (half its second derivative, in its unit per
-    s^2): zero for any ``f`` linear in time however uneven the steps."""
-    return np.diff(np.diff(f) / np.diff(t)) / (t[2:] - t[:-2])
+def local_residuals(t: np.ndarray, f: np.ndarray, samples: int = LOCAL_SAMPLES) -> np.ndarray:
+    """``f`` less its least-squares quadratic in time ``t`` over the ``samples`` (odd) samples centred on
+    each one, at that sample's time; the first and last ``samples // 2`` have none. Zero for anything
+    quadratic in time, however uneven the steps."""
+    half = samples // 2
+    centre = np.arange(half, f.size - half)
+    window = centre[:, None] + np.arange(-half, half + 1)[None, :]
+    dt = t[window] - t[centre][:, None]
+    dt = dt / np.abs(dt).max(axis=1, keepdims=True)
+    basis = dt[:, :, None] ** np.arange(3)[None, None, :]           # [n, samples, 3]: 1, t, t^2
+    value_at_centre = np.linalg.pinv(basis)[:, 0, :]                  # the fit's constant term
+    return f[centre] - np.einsum("nw,nw->n", value_at_centre, f[window])
 
 
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
                    t: np.ndarray | None = None) -> dict:
     """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
     the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains; where
-    that shows no feedback, the same of their second differences, sample to sample and divided by
-    time ``t`` (s), whichever shows more: a smooth reference masks neither."""
+    that shows no feedback, the same of what is left of each after its local quadratic in time ``t``
+    (s; evenly spaced samples where None), which a smooth reference does not mask."""
     u, y = np.asarray(u, float), np.asarray(y, float)
     none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
-            "differences": 1}
-    if u.size < 12:
+            "test": "increments"}
+    if u.size < 10 + LOCAL_SAMPLES:
         return none
     inside = unsaturated(u, command_range)
-    first = _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], 1)
-    if first["closed_loop"]:
+    first = _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")
+    t = np.arange(u.size, dtype=float) if t is None else np.asarray(t, float)
+    if first["closed_loop"] or not np.all(np.diff(t) > 0):
         return first
-    keep = inside[2:] & inside[1:-1] & inside[:-2]
-    second = [_correlated(np.diff(u, 2), np.diff(y, 2), keep, 2)]
-    if t is not None and np.all(np.diff(np.asarray(t, float)) > 0):
-        t = np.asarray(t, float)
-        second.append(_correlated(second_divided(t, u), second_divided(t, y), keep, 2))
-    best = min(second, key=lambda e: e["correlation"])
-    return best if best["closed_loop"] else first
+    n = u.size - LOCAL_SAMPLES + 1
+    keep = np.ones(n, dtype=bool)
+    for k in range(LOCAL_SAMPLES):          # every sample of the window inside the command's range
+        keep &= inside[k:k + n]
+    second = _correlated(local_residuals(t, u), local_residuals(t, y), keep, "local_residuals")
+    return second if second["closed_loop"] else first
 
 
 def direction(u: np.ndarray, y: np.ndarray, dt: float, command_range: tuple[float, float] | None = None) -> dict:
@@ -191,7 +197,7 @@ def detect(rec: Record, spec=None) -> dict:
     out = {"closed_loop": bool(closed), "joints": joints,
            "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "
                    f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}, "
-                   f"or else of their second differences, per sample or divided by time (a reference that moves all the time)"}
+                   f"or else of what is left of each after its local quadratic in time over {LOCAL_SAMPLES} samples (a reference that moves all the time)"}
     if closed:
         out["note"] = NOTE.format(joints=", ".join(f"{j}: correlation {joints[j]['correlation']:+.2f}, K = "
                                                    f"{joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
