@@ -199,6 +199,9 @@ def detect(rec: Record, spec=None) -> dict:
                    f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}, "
                    f"or else of what is left of each after its local quadratic in time over {LOCAL_SAMPLES} samples (a reference that moves all the time)"}
     if closed:
-        out["note"] = NOTE.format(joints=", ".join(f"{j}: correlation {joints[j]['correlation']:+.2f}, K = "
-                                                   f"{joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
+        out["note"] = NOTE.format(joints=", ".join(
+            f"{j}: correlation {joints[j]['correlation']:+.2f}"
+            + (" after each signal's local quadratic (a set point that moves all the time)"
+               if joints[j]["test"] == "local_residuals" else "")
+            + f", K = {joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
     return out
