@@ -107,11 +107,16 @@ def local_residuals(t: np.ndarray, f: np.ndarray, samples: int = LOCAL_SAMPLES) 
     half = samples // 2
     centre = np.arange(half, f.size - half)
     window = centre[:, None] + np.arange(-half, half + 1)[None, :]
-    dt = t[window] - t[centre][:, None]
-    dt = dt / np.abs(dt).max(axis=1, keepdims=True)
-    basis = dt[:, :, None] ** np.arange(3)[None, None, :]           # [n, samples, 3]: 1, t, t^2
-    value_at_centre = np.linalg.pinv(basis)[:, 0, :]                  # the fit's constant term
-    return f[centre] - np.einsum("nw,nw->n", value_at_centre, f[window])
+    x = t[window] - t[centre][:, None]
+    x = x / np.abs(x).max(axis=1, keepdims=True)
+    x2 = x * x
+    s0, s1, s2, s3, s4 = float(samples), x.sum(1), x2.sum(1), (x2 * x).sum(1), (x2 * x2).sum(1)
+    fw = f[window]
+    r0, r1, r2 = fw.sum(1), (x * fw).sum(1), (x2 * fw).sum(1)
+    # the fit's constant term by Cramer's rule on the 3 x 3 normal equations (one per sample)
+    det = s0 * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
+    c0 = r0 * (s2 * s4 - s3 * s3) - s1 * (r1 * s4 - s3 * r2) + s2 * (r1 * s3 - s2 * r2)
+    return f[centre] - c0 / det
 
 
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
@@ -123,12 +128,12 @@ def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, flo
     u, y = np.asarray(u, float), np.asarray(y, float)
     none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
             "test": "increments"}
-    if u.size < 10 + LOCAL_SAMPLES:
+    if u.size < 10:
         return none
     inside = unsaturated(u, command_range)
     first = _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")
     t = np.arange(u.size, dtype=float) if t is None else np.asarray(t, float)
-    if first["closed_loop"] or not np.all(np.diff(t) > 0):
+    if first["closed_loop"] or u.size < 10 + LOCAL_SAMPLES or not np.all(np.diff(t) > 0):
         return first
     n = u.size - LOCAL_SAMPLES + 1
     keep = np.ones(n, dtype=bool)
