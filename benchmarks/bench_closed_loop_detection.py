@@ -36,12 +36,6 @@ from sim_core.model.spec import load_robot  # noqa: E402
 REFERENCES = {"steps": reference_steps, "sine": sine_reference}
 
 
-def increments(u: np.ndarray, y: np.ndarray, command_range) -> dict:
-    """The increments' test alone (the detection before the local-residual test)."""
-    inside = cl.unsaturated(u, command_range)
-    return cl._correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")
-
-
 def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int, int]:
     """Print each closed-loop record's evidence; (records, found by increments, found by the evidence)."""
     n = by_increments = found = 0
@@ -54,18 +48,17 @@ def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int
         i = spec.tree.index(spec.joint(j).dof)
         span = float(spec.tree.upper[i] - spec.tree.lower[i])
         a, b = float(spec.get(f"joints.{j}.sensor.A")), float(spec.get(f"joints.{j}.sensor.B"))
-        u_hi = spec.joint(j).command_range[1]
-        kp = u_hi / (0.2 * span)                    # closed_loop_record's default
+        kp = spec.joint(j).command_range[1] / (0.2 * span)      # full command for 20 % of the range
         off = {f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}
         for reference in REFERENCES:
             for ti in (None, 1.0):
                 for log_every in (1, 20):
                     for seed in range(1, seeds + 1):
                         rows, _ = closed_loop_record(rig, hidden=None, off=off, seed=seed, duration=60.0,
-                                                     start_offset=0.05 * span, log_every=log_every, ti=ti,
+                                                     start_offset=0.05 * span, log_every=log_every, ti=ti, kp=kp,
                                                      reference=REFERENCES[reference])
                         t, y, u = rows[:, 0], a * rows[:, 1] + b, rows[:, 2]
-                        first = increments(u, y, spec.joint(j).command_range)
+                        first = cl.increments_evidence(u, y, spec.joint(j).command_range)
                         ev = cl.joint_evidence(u, y, spec.joint(j).command_range, t)
                         n += 1
                         by_increments += first["closed_loop"]
@@ -89,11 +82,10 @@ def _open_record(case: dict) -> list[tuple[str, float, float, bool]]:
         if f"u_{j}" not in d.dtype.names or f"q_{j}" not in d.dtype.names or np.ptp(d[f"u_{j}"]) == 0:
             continue
         u, y, t = d[f"u_{j}"], d[f"q_{j}"], d["time"]
-        ev = cl.joint_evidence(u, y, spec.joint(j).command_range, t)
-        local = cl._correlated(cl.local_residuals(t, u), cl.local_residuals(t, y),
-                               np.ones(u.size - cl.LOCAL_SAMPLES + 1, dtype=bool), "local_residuals")
-        out.append((case["id"], increments(u, y, spec.joint(j).command_range)["correlation"], local["correlation"],
-                    ev["closed_loop"]))
+        command_range = spec.joint(j).command_range
+        out.append((case["id"], cl.increments_evidence(u, y, command_range)["correlation"],
+                    cl.local_residual_evidence(u, y, command_range, t)["correlation"],
+                    cl.joint_evidence(u, y, command_range, t)["closed_loop"]))
     return out
 
 

@@ -8,13 +8,13 @@ import pytest
 
 from sim_core.dataset import write_csv
 from sim_core.identification import output_error as oe
-from sim_core.identification.closed_loop import (CORRELATION_LIMIT, RESTART_TAUS, _correlated, joint_evidence, time_constant,
-                                                 unsaturated)
+from sim_core.identification.closed_loop import (CORRELATION_LIMIT, RESTART_TAUS, increments_evidence, joint_evidence,
+                                                 time_constant)
+from sim_core.identification.record import Record
 from sim_core.kernel import layout as L
+from sim_core.model.spec import load_robot
 from sim_core.plant import Plant
 from sim_core.simulator import Simulator
-from sim_core.identification.record import Record
-from sim_core.model.spec import load_robot
 
 from closed_loop_sim import closed_loop_columns, open_loop_columns
 
@@ -54,8 +54,7 @@ def test_a_loop_tracking_a_moving_set_point_is_closed_loop(robot, joint, kp, hz)
     t = np.arange(30 * 50 + 1) / 50.0
     cols = closed_loop_columns(spec, joint, kp=kp, duration=30.0, seed=2, reference=q0 + 0.25 * np.sin(2 * np.pi * hz * t))
     u, y = cols[f"u_{joint}"], cols[f"q_{joint}"]
-    inside = unsaturated(u, spec.joint(joint).command_range)
-    assert not _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")["closed_loop"]
+    assert not increments_evidence(u, y, spec.joint(joint).command_range)["closed_loop"]
     ev = joint_evidence(u, y, spec.joint(joint).command_range, cols["time"])
     assert ev["closed_loop"] and ev["test"] == "local_residuals" and ev["correlation"] <= CORRELATION_LIMIT
     assert ev["lag_samples"] == 0 and ev["gain"] == pytest.approx(kp, rel=0.05)
@@ -84,7 +83,7 @@ def test_a_moving_set_point_on_an_uneven_clock_is_found_in_time_not_in_samples()
 
 @pytest.mark.parametrize("robot,joint", [("hydrolek", "j2"), ("harvester", "boom")])
 def test_an_open_loop_multisine_is_not(robot, joint):
-    """A smooth exogenous command: neither its increments nor its second differences follow the reading."""
+    """A smooth exogenous command: neither its increments nor its local residuals follow the reading."""
     spec = load_robot(robot)
     rng = np.random.default_rng(3)
     t = np.arange(1500) / 50.0

@@ -269,8 +269,8 @@ def test_every_candidate_refits_a_flow_gain_the_baseline_could_not_keep(cli, tmp
 def test_a_deadband_under_sine_tracking_is_named_with_the_load_carrying_the_supply(cli, tmp_path):
     """The cylinder rig tracking a slow sine (the load lifted and lowered all the time, the valve never
     at rest) with a 1.2 V deadband, no pressures (found closed loop, such a record shows a deadband
-    from about 1.1 V: its `detectable` row; 0.8 V gains 1.9-2.1 points, on the 2-point threshold). Beside the identified flow gain the supply and the
-    load are each under 3 sigma (either trades against the other: their ratio sets the load
+    from about 1.1 V: its `detectable` row; 0.8 V gains 1.9-2.1 points, on the 2-point threshold).
+    Beside the identified flow gain the supply and the load are each under 3 sigma (either trades against the other: their ratio sets the load
     pressure), but together the record needs them: reset both to nominal, the baseline's cost rose
     28-fold, every candidate gained about as much by making up for it (seven within 1.2 points) and
     the deadband was named an area ratio. Now only the weaker goes: the load carries what the two

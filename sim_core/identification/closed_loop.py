@@ -77,10 +77,16 @@ def unsaturated(u: np.ndarray, command_range: tuple[float, float] | None) -> np.
     return (u > lo + span) & (u < hi - span)
 
 
+def _evidence(test: str, rho: float = 0.0, gain: float = 0.0, lag: int = 0) -> dict:
+    """One test's evidence: correlation ``rho`` at ``lag`` samples, the gain ``K`` it implies."""
+    return {"correlation": round(rho, 4), "gain": gain, "lag_samples": lag, "explained": round(rho * rho, 4),
+            "closed_loop": rho <= CORRELATION_LIMIT, "test": test}
+
+
 def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, test: str) -> dict:
     """The most negative correlation of ``du`` with ``dy`` over lags 0..MAX_LAG (``du`` that many
     samples later), over ``keep``'s samples without the largest command changes."""
-    best = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False, "test": test}
+    best = _evidence(test)
     big = np.abs(du)
     if keep.any():
         keep = keep & (big <= np.quantile(big[keep], JUMP_QUANTILE))
@@ -95,8 +101,7 @@ def _correlated(du: np.ndarray, dy: np.ndarray, keep: np.ndarray, test: str) -> 
             continue
         rho = float(a @ b) / (sa * sb)
         if rho < best["correlation"]:
-            best = {"correlation": round(rho, 4), "gain": -float(a @ b) / float(b @ b), "lag_samples": lag,
-                    "explained": round(rho * rho, 4), "closed_loop": rho <= CORRELATION_LIMIT, "test": test}
+            best = _evidence(test, rho, -float(a @ b) / float(b @ b), lag)
     return best
 
 
@@ -119,27 +124,39 @@ def local_residuals(t: np.ndarray, f: np.ndarray, samples: int = LOCAL_SAMPLES) 
     return f[centre] - c0 / det
 
 
-def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
-                   t: np.ndarray | None = None) -> dict:
+def increments_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None) -> dict:
     """Correlation of the command's and the reading's increments (most negative over lags 0..MAX_LAG),
-    the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains; where
-    that shows no feedback, the same of what is left of each after its local quadratic in time ``t``
-    (s; evenly spaced samples where None), which a smooth reference does not mask."""
+    the gain ``K`` of ``du ~ -K dy`` at that lag and the share of ``du``'s variance it explains."""
     u, y = np.asarray(u, float), np.asarray(y, float)
-    none = {"correlation": 0.0, "gain": 0.0, "lag_samples": 0, "explained": 0.0, "closed_loop": False,
-            "test": "increments"}
-    if u.size < 10:
-        return none
     inside = unsaturated(u, command_range)
-    first = _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")
+    return _correlated(np.diff(u), np.diff(y), inside[1:] & inside[:-1], "increments")
+
+
+def local_residual_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
+                            t: np.ndarray | None = None) -> dict:
+    """The same of what is left of each after its local quadratic in time ``t`` (s; evenly spaced
+    samples where None), over windows whose every sample is inside the command's range; no feedback
+    where the record is too short or its clock does not increase."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
     t = np.arange(u.size, dtype=float) if t is None else np.asarray(t, float)
-    if first["closed_loop"] or u.size < 10 + LOCAL_SAMPLES or not np.all(np.diff(t) > 0):
-        return first
+    if u.size < 10 + LOCAL_SAMPLES or not np.all(np.diff(t) > 0):
+        return _evidence("local_residuals")
+    inside = unsaturated(u, command_range)
     n = u.size - LOCAL_SAMPLES + 1
     keep = np.ones(n, dtype=bool)
-    for k in range(LOCAL_SAMPLES):          # every sample of the window inside the command's range
+    for k in range(LOCAL_SAMPLES):
         keep &= inside[k:k + n]
-    second = _correlated(local_residuals(t, u), local_residuals(t, y), keep, "local_residuals")
+    return _correlated(local_residuals(t, u), local_residuals(t, y), keep, "local_residuals")
+
+
+def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
+                   t: np.ndarray | None = None) -> dict:
+    """:func:`increments_evidence`; where that shows no feedback, :func:`local_residual_evidence` if it
+    does (a smooth reference masks the increments, not the local residuals)."""
+    first = increments_evidence(u, y, command_range)
+    if first["closed_loop"]:
+        return first
+    second = local_residual_evidence(u, y, command_range, t)
     return second if second["closed_loop"] else first
 
 
