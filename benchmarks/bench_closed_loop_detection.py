@@ -1,10 +1,11 @@
 """Is a record closed loop? ``closed_loop.joint_evidence`` over records whose answer is known, the
 increments' test alone printed beside it as the reference measured in the same run.
 
-Closed loop: every ``rig new`` template's P or PI loop (``tests/rig_records.py``, the rig 20 % off its
+Closed loop: every ``rig new`` template's P or PI loop (integral time 1 or 0.3 s) (``tests/rig_records.py``, the rig 20 % off its
 flow and 15 % off its supply) tracking set-point steps or a slow sine, the controller at the log's
 50 Hz or at 1 kHz with every 20th sample logged; printed per record: the increments' correlation and
-gain, the evidence's (which test found it), and the controller's proportional gain.
+gain, the evidence's (which test gave it), and the controller's proportional gain; summed: how many
+were found, and how many with the proportional gain within 5 %.
 Open loop: the scored matrix's HydroLek records (``bench_diagnose_matrix.py``: PRBS, multisine,
 operator doublets; singles, pairs, clean and out-of-bank), none of which may be found closed; printed:
 how many were, and the most negative correlation of each test.
@@ -34,11 +35,15 @@ from sim_core.identification import closed_loop as cl  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
 
 REFERENCES = {"steps": reference_steps, "sine": sine_reference}
+INTEGRAL_TIMES = (None, 1.0, 0.3)   # P, and PI with these integral times (s)
+GAIN_TOLERANCE = 0.05   # a gain this close to the controller's proportional gain counts as given
 
 
-def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int, int]:
-    """Print each closed-loop record's evidence; (records, found by increments, found by the evidence)."""
-    n = by_increments = found = 0
+def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int, int, int, int]:
+    """Print each closed-loop record's evidence; (records, found by the increments, found by the
+    evidence, the increments' gain within ``GAIN_TOLERANCE`` of the controller's proportional gain,
+    the evidence's)."""
+    n = by_increments = found = first_gain = gain = 0
     for template in templates:
         rig = work / template
         subprocess.run([sys.executable, "-m", "sim_core.cli", "rig", "new", template, "--out", str(rig)], check=True,
@@ -51,7 +56,7 @@ def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int
         kp = spec.joint(j).command_range[1] / (0.2 * span)      # full command for 20 % of the range
         off = {f"joints.{j}.valve.rated_flow": 1.2, "supply.pressure": 0.85}
         for reference in REFERENCES:
-            for ti in (None, 1.0):
+            for ti in INTEGRAL_TIMES:
                 for log_every in (1, 20):
                     for seed in range(1, seeds + 1):
                         rows, _ = closed_loop_record(rig, hidden=None, off=off, seed=seed, duration=60.0,
@@ -63,11 +68,13 @@ def closed_loops(templates: list[str], seeds: int, work: Path) -> tuple[int, int
                         n += 1
                         by_increments += first["closed_loop"]
                         found += ev["closed_loop"]
-                        print(f"{template:8s} {reference:5s} {'PI' if ti else 'P ':2s} controller {50 * log_every:5d} Hz "
+                        first_gain += first["closed_loop"] and abs(first["gain"] / kp - 1) <= GAIN_TOLERANCE
+                        gain += ev["closed_loop"] and abs(ev["gain"] / kp - 1) <= GAIN_TOLERANCE
+                        print(f"{template:8s} {reference:5s} {f'PI {ti:g} s' if ti else 'P':8s} controller {50 * log_every:5d} Hz "
                               f"seed {seed}: increments {first['correlation']:+.2f} (K {first['gain']:.3g}); "
                               f"evidence {ev['correlation']:+.2f} (K {ev['gain']:.3g}, {ev['test']}, "
                               f"{'closed' if ev['closed_loop'] else 'OPEN'}); kp {kp:.3g}", flush=True)
-    return n, by_increments, found
+    return n, by_increments, found, first_gain, gain
 
 
 def _open_record(case: dict) -> list[tuple[str, float, float, bool]]:
@@ -111,8 +118,9 @@ def main() -> int:
     ap.add_argument("--no-open-loop", action="store_true", help="skip the matrix's open-loop records")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_cl_") as tmp:
-        n, first, found = closed_loops(args.templates.split(","), args.seeds, Path(tmp))
+        n, first, found, first_gain, gain = closed_loops(args.templates.split(","), args.seeds, Path(tmp))
     print(f"\nclosed-loop records found closed: {found}/{n} (the increments alone: {first}/{n})")
+    print(f"... found with the proportional gain within {GAIN_TOLERANCE:.0%}: {gain}/{n} (the increments alone: {first_gain}/{n})")
     if not args.no_open_loop:
         m, wrong, c1, c2 = open_loops(args.open_loop_seeds)
         print(f"open-loop records found closed: {wrong}/{m}; most negative correlation: increments {c1:+.2f}, "

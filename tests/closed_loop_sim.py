@@ -1,4 +1,4 @@
-"""Records made under a P controller: the simulated robot stepped at the controller's rate with
+"""Records made under a P (or PI) controller: the simulated robot stepped at the controller's rate with
 ``u = Kp (r - y)`` computed from the sensor reading ``y`` (what a real closed-loop log holds), beside
 an open-loop PRBS record of the same robot, joint and length. Both return dataset columns."""
 
@@ -28,9 +28,12 @@ def step_reference(spec, joint: str, duration: float, rate: float, seed: int, ho
 
 
 def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, rate: float = 50.0,
-                        seed: int = 0, reference: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                        seed: int = 0, reference: np.ndarray | None = None,
+                        ti: float | None = None) -> dict[str, np.ndarray]:
     """Time, commands, readings and pressures of ``spec`` under ``u = kp (r - y)`` (V, clipped to
-    the command range) on ``joint`` at ``rate`` Hz; ``y`` is the sensor reading (noise included)."""
+    the command range) on ``joint`` at ``rate`` Hz; ``y`` is the sensor reading (noise included).
+    ``ti``: integral time (s) of a PI controller, ``u = kp (e + integral(e) / ti)``, its integral
+    frozen while the command saturates; None: P only."""
     ctx = Plant(spec).create_context(seed=seed)
     sim = Simulator(ctx)
     r = step_reference(spec, joint, duration, rate, seed) if reference is None else reference
@@ -42,9 +45,14 @@ def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, 
     Y = np.zeros((n, na, L.YA_N))
     dt = 1.0 / rate
     row = sim.sample()
+    integral = 0.0
     for k in range(n):
         Y[k] = row
-        U[k, a] = min(max(kp * (r[k] - row[a, L.YA_ANGLE]), lo), hi)
+        e = r[k] - row[a, L.YA_ANGLE]
+        raw = kp * (e + (integral / ti if ti else 0.0))
+        U[k, a] = min(max(raw, lo), hi)
+        if ti and U[k, a] == raw:
+            integral += e * dt
         if k < n - 1:
             row = sim.step(U[k], dt).copy()
     return _columns(spec, np.arange(n) * dt, U, Y)

@@ -60,6 +60,24 @@ def test_a_loop_tracking_a_moving_set_point_is_closed_loop(robot, joint, kp, hz)
     assert ev["lag_samples"] == 0 and ev["gain"] == pytest.approx(kp, rel=0.05)
 
 
+@pytest.mark.parametrize("robot,joint,kp,ti,increments_find_it", [
+    ("hydrolek", "j2", 15.0, 5.0, True), ("harvester", "boom", 60.0, 2.0, True),
+    ("hydrolek", "j2", 15.0, 0.3, False), ("harvester", "boom", 20.0, 0.5, False)])
+def test_a_pi_loop_on_steps_gives_its_proportional_gain(robot, joint, kp, ti, increments_find_it):
+    """A PI controller: its integral adds ``kp e dt / ti`` to the command's increments, in step with the
+    joint's motion to close the error ``e``, so the increments give the proportional gain low by about
+    the loop's time constant over ``ti`` (or miss the loop); after the local quadratic the integral's
+    smooth action is gone, and that correlation is the stronger, so it is the evidence."""
+    spec = load_robot(robot)
+    cols = closed_loop_columns(spec, joint, kp=kp, duration=30.0, seed=2, ti=ti)
+    u, y, rng = cols[f"u_{joint}"], cols[f"q_{joint}"], spec.joint(joint).command_range
+    first = increments_evidence(u, y, rng)
+    ev = joint_evidence(u, y, rng, cols["time"])
+    assert ev["closed_loop"] and ev["test"] == "local_residuals" and ev["correlation"] < first["correlation"]
+    assert ev["lag_samples"] == 0 and ev["gain"] == pytest.approx(kp, rel=0.05)
+    assert first["closed_loop"] == increments_find_it and first["gain"] < 0.85 * kp   # the increments' own answer
+
+
 def test_a_moving_set_point_on_an_uneven_clock_is_found_in_time_not_in_samples():
     """Samples 10 % uneven, a P loop reading a noisy sensor around an ideal valve, tracking a 0.3 Hz
     sine: the set point moves by more or less per sample, which a local fit over sample numbers reads

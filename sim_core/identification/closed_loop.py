@@ -9,11 +9,14 @@ therefore correlates the command's increments with the reading's, at lags 0 to `
 jumps (reference steps, PRBS switches) and samples at the command limits (saturation cuts the loop).
 A reference that moves all the time (a sine to track, a ramp) puts its own increments into both,
 ``du = K (dr - dy)`` with ``dy`` mostly the joint following ``dr``: the noise's share of ``dy`` is then
-small and the correlation weak. So where the increments do not show feedback, the same test runs on
-what is left of each signal after its local quadratic in time over ``LOCAL_SAMPLES`` samples (fitted
-at each sample's own time, so uneven steps are allowed): a smooth reference and the motion that
-follows it vanish there, a sensor's noise and the command's answer to it do not, and in open loop the
-command's and the reading's residuals stay as uncorrelated as their increments.
+small and the correlation weak; a PI controller's integral adds ``K_i e dt`` to ``du``, which grows with
+the error while the joint moves to close it, so it biases ``K`` low. So the same test also runs on what
+is left of each signal after its local quadratic in time over ``LOCAL_SAMPLES`` samples (fitted at each
+sample's own time, so uneven steps are allowed): a smooth reference, the motion that follows it and an
+integral's smooth action vanish there, a sensor's noise and the command's answer to it do not, and in
+open loop the command's and the reading's residuals stay as uncorrelated as their increments. The
+evidence is the test with the stronger correlation: the larger share of the command's changes that
+``-K dy`` explains, the less of anything else is left to bias the gain.
 Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
 the share of the command's changes ``-K dy`` explains, and which test showed it (``test``:
 ``increments`` or ``local_residuals``).
@@ -151,13 +154,12 @@ def local_residual_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[f
 
 def joint_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
                    t: np.ndarray | None = None) -> dict:
-    """:func:`increments_evidence`; where that shows no feedback, :func:`local_residual_evidence` if it
-    does (a smooth reference masks the increments, not the local residuals)."""
+    """:func:`increments_evidence` or :func:`local_residual_evidence`, whichever correlation is the more
+    negative (a smooth reference or an integral's action masks the increments, not the local
+    residuals); the increments' on a tie."""
     first = increments_evidence(u, y, command_range)
-    if first["closed_loop"]:
-        return first
     second = local_residual_evidence(u, y, command_range, t)
-    return second if second["closed_loop"] else first
+    return second if second["correlation"] < first["correlation"] else first
 
 
 def direction(u: np.ndarray, y: np.ndarray, dt: float, command_range: tuple[float, float] | None = None) -> dict:
@@ -219,11 +221,12 @@ def detect(rec: Record, spec=None) -> dict:
     out = {"closed_loop": bool(closed), "joints": joints,
            "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "
                    f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}, "
-                   f"or else of what is left of each after its local quadratic in time over {LOCAL_SAMPLES} samples (a reference that moves all the time)"}
+                   f"or of what is left of each after its local quadratic in time over {LOCAL_SAMPLES} samples (a reference that moves all the time, "
+                   f"a PI controller's integral), whichever is the more negative"}
     if closed:
         out["note"] = NOTE.format(joints=", ".join(
             f"{j}: correlation {joints[j]['correlation']:+.2f}"
-            + (" after each signal's local quadratic (a set point that moves all the time)"
+            + (" after each signal's local quadratic (a set point that moves all the time, or a controller's integral)"
                if joints[j]["test"] == "local_residuals" else "")
             + f", K = {joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
     return out
