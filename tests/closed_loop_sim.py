@@ -29,11 +29,13 @@ def step_reference(spec, joint: str, duration: float, rate: float, seed: int, ho
 
 def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, rate: float = 50.0,
                         seed: int = 0, reference: np.ndarray | None = None,
-                        ti: float | None = None) -> dict[str, np.ndarray]:
+                        ti: float | None = None, settle_band: float = 0.0) -> dict[str, np.ndarray]:
     """Time, commands, readings and pressures of ``spec`` under ``u = kp (r - y)`` (V, clipped to
     the command range) on ``joint`` at ``rate`` Hz; ``y`` is the sensor reading (noise included).
     ``ti``: integral time (s) of a PI controller, ``u = kp (e + integral(e) / ti)``, its integral
-    frozen while the command saturates; None: P only."""
+    frozen while the command saturates; None: P only. ``settle_band`` (rad or m): once the error is
+    within it, the controller parks the valve at 0 V until the error leaves twice it (a closed valve
+    holds the joint without hunting)."""
     ctx = Plant(spec).create_context(seed=seed)
     sim = Simulator(ctx)
     r = step_reference(spec, joint, duration, rate, seed) if reference is None else reference
@@ -45,13 +47,14 @@ def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, 
     Y = np.zeros((n, na, L.YA_N))
     dt = 1.0 / rate
     row = sim.sample()
-    integral = 0.0
+    integral, parked = 0.0, False
     for k in range(n):
         Y[k] = row
         e = r[k] - row[a, L.YA_ANGLE]
-        raw = kp * (e + (integral / ti if ti else 0.0))
+        parked = abs(e) < (2.0 if parked else 1.0) * settle_band
+        raw = 0.0 if parked else kp * (e + (integral / ti if ti else 0.0))
         U[k, a] = min(max(raw, lo), hi)
-        if ti and U[k, a] == raw:
+        if ti and not parked and U[k, a] == raw:
             integral += e * dt
         if k < n - 1:
             row = sim.step(U[k], dt).copy()

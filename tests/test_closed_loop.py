@@ -78,6 +78,40 @@ def test_a_pi_loop_on_steps_gives_its_proportional_gain(robot, joint, kp, ti, in
     assert first["closed_loop"] == increments_find_it and first["gain"] < 0.85 * kp   # the increments' own answer
 
 
+@pytest.mark.parametrize("robot,joint,kp,increments_find_it", [("hydrolek", "j2", 15.0, False),
+                                                            ("harvester", "boom", 60.0, True)])
+def test_a_controller_that_parks_its_valve_is_closed_loop(robot, joint, kp, increments_find_it):
+    """A PI controller that parks the valve at 0 V once its joint settles within 1 cm (or rad): half
+    the record or more the command holds and does not act on the reading, whose noise would dilute
+    the correlation; over the windows where the command changes at every step, it is the loop's."""
+    spec = load_robot(robot)
+    cols = closed_loop_columns(spec, joint, kp=kp, duration=30.0, seed=2, ti=1.0, settle_band=0.01)
+    u, y, rng = cols[f"u_{joint}"], cols[f"q_{joint}"], spec.joint(joint).command_range
+    assert np.mean(u == 0.0) > 0.4
+    ev = joint_evidence(u, y, rng, cols["time"])
+    assert ev["closed_loop"] and ev["test"] == "local_residuals" and ev["lag_samples"] == 0
+    assert ev["gain"] == pytest.approx(kp, rel=0.05)
+    assert increments_evidence(u, y, rng)["closed_loop"] == increments_find_it
+
+
+def test_the_reference_pid_of_mars_nd_is_closed_loop_on_every_joint_it_moves():
+    """The paper's joint PID (controllers/pid.py: a filtered derivative, deadband compensation, the
+    valve parked within a settle band) driving MARS-ND through its targets, 30 s at 200 Hz."""
+    from controllers.experiment import run_local
+    from controllers.scenarios import SCENARIOS
+    scenario = SCENARIOS["mars_nd"]
+    trace = run_local(scenario, "simulated", 30.0, None)
+    spec = load_robot(scenario.robot)
+    t, U, Q = np.asarray(trace["t"]), np.asarray(trace["u"]), np.asarray(trace["angle"])
+    moved = [a for a in range(U.shape[1]) if np.ptp(U[:, a]) > 0]
+    assert len(moved) >= 6
+    for a in moved:
+        j = spec.joint_names[a]
+        assert np.mean(U[:, a] == 0.0) > 0.3, j                  # parked much of the time
+        ev = joint_evidence(U[:, a], Q[:, a], spec.joint(j).command_range, t)
+        assert ev["closed_loop"] and ev["lag_samples"] == 0, (j, ev)
+
+
 def test_a_moving_set_point_on_an_uneven_clock_is_found_in_time_not_in_samples():
     """Samples 10 % uneven, a P loop reading a noisy sensor around an ideal valve, tracking a 0.3 Hz
     sine: the set point moves by more or less per sample, which a local fit over sample numbers reads

@@ -14,7 +14,11 @@ the error while the joint moves to close it, so it biases ``K`` low. So the same
 is left of each signal after its local quadratic in time over ``LOCAL_SAMPLES`` samples (fitted at each
 sample's own time, so uneven steps are allowed): a smooth reference, the motion that follows it and an
 integral's smooth action vanish there, a sensor's noise and the command's answer to it do not, and in
-open loop the command's and the reading's residuals stay as uncorrelated as their increments. The
+open loop the command's and the reading's residuals stay as uncorrelated as their increments. It
+takes only windows over which the command changes at every step: a controller acting on a noisy
+reading does, a controller that parks the valve once its joint settles does not act there, and a
+held open-loop command (a PRBS) is left with its switches, where the plant's step response, not
+feedback, ties the two. The
 evidence is the test with the stronger correlation: the larger share of the command's changes that
 ``-K dy`` explains, the less of anything else is left to bias the gain.
 Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
@@ -138,17 +142,24 @@ def increments_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float
 def local_residual_evidence(u: np.ndarray, y: np.ndarray, command_range: tuple[float, float] | None = None,
                             t: np.ndarray | None = None) -> dict:
     """The same of what is left of each after its local quadratic in time ``t`` (s; evenly spaced
-    samples where None), over windows whose every sample is inside the command's range; no feedback
-    where the record is too short or its clock does not increase."""
+    samples where None), over windows whose every sample is inside the command's range and whose
+    command changes at every step: a controller acting on a noisy reading does, one that parks the
+    valve within a settle band does not act on the reading there (the reading's noise would only
+    dilute the correlation), and a held open-loop command (a PRBS, a doublet) leaves only its
+    switches, whose windows correlate as the plant's step response does, not as feedback; no
+    feedback where the record is too short or its clock does not increase."""
     u, y = np.asarray(u, float), np.asarray(y, float)
     t = np.arange(u.size, dtype=float) if t is None else np.asarray(t, float)
     if u.size < 10 + LOCAL_SAMPLES or not np.all(np.diff(t) > 0):
         return _evidence("local_residuals")
     inside = unsaturated(u, command_range)
     n = u.size - LOCAL_SAMPLES + 1
+    changes = np.diff(u) != 0.0
     keep = np.ones(n, dtype=bool)
     for k in range(LOCAL_SAMPLES):
         keep &= inside[k:k + n]
+    for k in range(LOCAL_SAMPLES - 1):
+        keep &= changes[k:k + n]
     return _correlated(local_residuals(t, u), local_residuals(t, y), keep, "local_residuals")
 
 
@@ -222,7 +233,7 @@ def detect(rec: Record, spec=None) -> dict:
            "rule": f"correlation of the command's and the position reading's sample-to-sample changes (lags 0-{MAX_LAG}, "
                    f"without the largest {1 - JUMP_QUANTILE:.0%} of command jumps and saturated samples) <= {CORRELATION_LIMIT:g}, "
                    f"or of what is left of each after its local quadratic in time over {LOCAL_SAMPLES} samples (a reference that moves all the time, "
-                   f"a PI controller's integral), whichever is the more negative"}
+                   f"a PI controller's integral; windows whose command changes at every step), whichever is the more negative"}
     if closed:
         out["note"] = NOTE.format(joints=", ".join(
             f"{j}: correlation {joints[j]['correlation']:+.2f}"
