@@ -81,7 +81,7 @@ def test_a_pi_loop_on_steps_gives_its_proportional_gain(robot, joint, kp, ti, in
 @pytest.mark.parametrize("robot,joint,kp,increments_find_it", [("hydrolek", "j2", 15.0, False),
                                                             ("harvester", "boom", 60.0, True)])
 def test_a_controller_that_parks_its_valve_is_closed_loop(robot, joint, kp, increments_find_it):
-    """A PI controller that parks the valve at 0 V once its joint settles within 1 cm (or rad): half
+    """A PI controller that parks the valve at 0 V once its joint settles within 0.01 rad (or m): half
     the record or more the command holds and does not act on the reading, whose noise would dilute
     the correlation; over the windows where the command changes at every step, it is the loop's."""
     spec = load_robot(robot)

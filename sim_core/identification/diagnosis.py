@@ -39,13 +39,14 @@ from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, rec
                        residual_explained_pct, rivalry, unexplained_reasons, verdict)
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter, free_parameter
-from .record import END_STOP_MARGIN, ESTIMATION_SHARE, DataCheck, Record, check_record
+from .record import END_STOP_MARGIN, DataCheck, Record, check_record
 from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import autocorrelation, independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         channel_ceilings, free_list, select, without)
 from .signatures import joint_signatures, public
+from .validation_split import validation_start
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
 
@@ -175,10 +176,11 @@ def _numerics_again(model, fast: Runner, vfast: Runner, vprob: oe.Problem, rec: 
 
 
 def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
-    """Estimation and validation problems: the first 60 % and the last 40 % of a single record, or the
-    whole record and the whole validation record."""
+    """Estimation and validation problems: the first 60 % and the last 40 % of a single record (of its
+    motion where a part of that holds still: validation_split.py), or the whole record and the whole
+    validation record."""
     if val is None:
-        n = int(round(rec.n * ESTIMATION_SHARE))
+        n = validation_start(rec, targets, notes)
         n_est = min(n, MAX_ESTIMATION_SAMPLES)
         if n_est < n:
             notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of the {n} before the validation part")
