@@ -205,26 +205,6 @@ def test_forward_stops_at_max_effects():
     assert len(fw.accepted) == 2 and fw.stopped == "reached 2 effects"
 
 
-def test_the_effect_limit_is_per_diagnosed_joint():
-    """Four joints whose valves share one overlap: each joint's deadband passes in every round, and all
-    four are named under the limit of four joints; under one joint's limit the fourth is left out."""
-    from sim_core.identification.selection import effect_limit
-    joints = ["j1", "j2", "j3", "j4"]
-    cands = [cand("deadband", j) for j in joints]
-
-    def every_round(pool, model, have, r):
-        return [judged(scored(c, gain=10.0 - joints.index(c.joint))) for c in pool]
-
-    def named(limit):
-        fw = dc.forward(cands, frozenset(), evaluate_round=every_round, extend=lambda m, ev: m | {ev.candidate.label},
-                        score=lambda m: 0.0, ceiling=100.0, max_effects=limit)
-        return [e.candidate.joint for e in fw.accepted], fw.stopped
-
-    assert effect_limit(joints) == 4 * dc.MAX_EFFECTS and effect_limit([]) == dc.MAX_EFFECTS
-    assert named(effect_limit(joints)) == (joints, "no candidates left")
-    assert named(effect_limit(["j1"])) == (joints[:dc.MAX_EFFECTS], f"reached {dc.MAX_EFFECTS} effects")
-
-
 # ---- other first picks when the greedy path misses the record ------------------------------------------
 def restarted(scores, misfit=True, ceiling=100.0):
     """forward() then restart() on a table where the greedy pick A (10 points) leads nowhere and B (8)
