@@ -18,9 +18,8 @@ open loop the command's and the reading's residuals stay as uncorrelated as thei
 takes only windows over which the command changes at every step: a controller acting on a noisy
 reading does, a controller that parks the valve once its joint settles does not act there, and a
 held open-loop command (a PRBS) is left with its switches, where the plant's step response, not
-feedback, ties the two. The
-evidence is the test with the stronger correlation: the larger share of the command's changes that
-``-K dy`` explains, the less of anything else is left to bias the gain.
+feedback, ties the two. The evidence is the test with the stronger correlation: the larger share of
+the command's changes that ``-K dy`` explains, the less of anything else is left to bias the gain.
 Evidence reported per joint: that correlation, the gain ``K`` it implies (V per rad or m), the lag,
 the share of the command's changes ``-K dy`` explains, and which test showed it (``test``:
 ``increments`` or ``local_residuals``).

@@ -46,9 +46,9 @@ from .residual_tests import autocorrelation, independence, ljung_box, spectrum, 
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
                         channel_ceilings, free_list, select, without)
 from .signatures import joint_signatures, public
-from .validation_split import validation_start
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
+from .validation_split import validation_start
 
 
 @dataclass
