@@ -1,8 +1,8 @@
 """Is a record closed loop? ``closed_loop.joint_evidence`` over records whose answer is known, the
 increments' test alone printed beside it as the reference measured in the same run.
 
-Closed loop: every ``rig new`` template's P or PI loop (integral time 1 or 0.3 s) (``tests/rig_records.py``, the rig 20 % off its
-flow and 15 % off its supply) tracking set-point steps or a slow sine, the controller at the log's
+Closed loop: every ``rig new`` template's P or PI loop (integral time 1 or 0.3 s; ``tests/rig_records.py``,
+the rig 20 % off its flow and 15 % off its supply) tracking set-point steps or a slow sine, the controller at the log's
 50 Hz or at 1 kHz with every 20th sample logged; printed per record: the increments' correlation and
 gain, the evidence's (which test gave it), and the controller's proportional gain; summed: how many
 were found, and how many with the proportional gain within 5 %.

@@ -34,8 +34,8 @@ def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, 
     the command range) on ``joint`` at ``rate`` Hz; ``y`` is the sensor reading (noise included).
     ``ti``: integral time (s) of a PI controller, ``u = kp (e + integral(e) / ti)``, its integral
     frozen while the command saturates; None: P only. ``settle_band`` (rad or m): once the error is
-    within it, the controller parks the valve at 0 V until the error leaves twice it (a closed valve
-    holds the joint without hunting)."""
+    within it, the controller parks the valve at 0 V, its integral frozen, until the error leaves twice
+    it (a closed valve holds the joint without hunting)."""
     ctx = Plant(spec).create_context(seed=seed)
     sim = Simulator(ctx)
     r = step_reference(spec, joint, duration, rate, seed) if reference is None else reference

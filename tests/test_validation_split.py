@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from sim_core.dataset import write_csv
-from sim_core.identification.record import ESTIMATION_SHARE, Record
-from sim_core.identification.validation_split import holds_still, motion_span, validation_start
+from sim_core.identification.record import ESTIMATION_SHARE, Record, holds_still
+from sim_core.identification.validation_split import motion_span, validation_start
 from sim_core.model.spec import load_robot
 
 from closed_loop_sim import closed_loop_columns, step_reference

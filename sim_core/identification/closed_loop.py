@@ -236,7 +236,8 @@ def detect(rec: Record, spec=None) -> dict:
     if closed:
         out["note"] = NOTE.format(joints=", ".join(
             f"{j}: correlation {joints[j]['correlation']:+.2f}"
-            + (" after each signal's local quadratic (a set point that moves all the time, or a controller's integral)"
+            + (" after each signal's local quadratic, which a moving set point, a controller's integral or a "
+               "parked valve does not mask"
                if joints[j]["test"] == "local_residuals" else "")
             + f", K = {joints[j]['gain']:.3g} {_unit(spec, j)}" for j in closed))
     return out

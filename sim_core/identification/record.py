@@ -195,6 +195,17 @@ def record_from_dataset(ds: Dataset, spec, *, source: str, initial_pose: str = "
                   "true" if initial_pose == "spec" else "reading")
 
 
+def reading_span(q: np.ndarray) -> float:
+    """How far a reading ranges: its 1st to 99th percentile (a few glitches do not widen it)."""
+    return float(np.percentile(q, 99) - np.percentile(q, 1))
+
+
+def holds_still(q: np.ndarray) -> bool:
+    """Whether a reading spans no more than ``STILL_SPAN`` noise sigmas: it never leaves its noise."""
+    span = reading_span(q)
+    return span == 0.0 or span <= STILL_SPAN * noise_std(q)
+
+
 def _check_motion(spec, angles, U, excited, where: str, notes: list[str]) -> None:
     """A commanded joint whose reading never leaves its noise (the pump off, the valve unplugged, the
     wrong column mapped) says nothing about the model: noted, and refused when no commanded joint moves."""
@@ -203,9 +214,8 @@ def _check_motion(spec, angles, U, excited, where: str, notes: list[str]) -> Non
         if j not in angles:
             continue
         q = angles[j]
-        span = float(np.percentile(q, 99) - np.percentile(q, 1))
-        sigma = noise_std(q)
-        if span <= STILL_SPAN * sigma or span == 0.0:
+        if holds_still(q):
+            span, sigma = reading_span(q), noise_std(q)
             u = U[:, spec.joint_names.index(j)]
             unit = "m" if spec.tree.is_prismatic(spec.joint(j).dof) else "rad"
             still[j] = (f"q_{j} spans {span:.3g} {unit} (1st to 99th percentile), "

@@ -5,11 +5,12 @@ ends with the rig standing still (the test is over, the logger runs on) or start
 before the test): a part in which no diagnosed joint's reading leaves its noise carries nothing to
 judge a model by. Validated on such a part, a model that is exactly right fits the noise near 0 %,
 one a fraction of a degree off scores thousands of points below, and a clean record reads as
-unexplained. So where either part of the default split holds still on every diagnosed joint, the
-split is put at ``ESTIMATION_SHARE`` of the record's motion instead: from the first sample at which
-any joint has left the reading it starts at, to the last at which any is still away from the one it
-ends at (by more than ``STILL_SPAN / 2`` noise sigmas). The still parts stay in the record: a hold
-can show a leak's creep, and the other part still has the motion.
+unexplained. So where either part of the default split holds still on every diagnosed joint
+(``record.holds_still``, the rule a record's commanded joints are checked by), the split is put at
+``ESTIMATION_SHARE`` of the record's motion instead: from the first sample at which any joint has
+left the reading it starts at, to the last at which any is still away from the one it ends at (by
+more than ``STILL_SPAN / 2`` noise sigmas). The still parts stay in the record: a hold can show a
+leak's creep, and the other part still has the motion.
 """
 
 from __future__ import annotations
@@ -17,15 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from .metrics import noise_std
-from .record import ESTIMATION_SHARE, STILL_SPAN, Record
+from .record import ESTIMATION_SHARE, STILL_SPAN, Record, holds_still
 
 LEVEL_SAMPLES = 5     # samples whose median is the reading a joint starts or ends at
-
-
-def holds_still(q: np.ndarray) -> bool:
-    """Whether a reading spans (1st to 99th percentile) no more than ``STILL_SPAN`` noise sigmas."""
-    span = float(np.percentile(q, 99) - np.percentile(q, 1))
-    return span == 0.0 or span <= STILL_SPAN * noise_std(q)
 
 
 def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
