@@ -33,26 +33,23 @@ def _moves(n: int, lo: int, hi: int) -> np.ndarray:
 
 def test_a_record_that_moves_throughout_keeps_the_default_split():
     rec = _record(_moves(3000, 0, 3000))
-    notes = []
-    assert validation_start(rec, ["j"], notes) == round(3000 * ESTIMATION_SHARE) and notes == []
+    assert validation_start(rec, ["j"]) == (round(3000 * ESTIMATION_SHARE), "")
 
 
 def test_a_record_still_after_its_first_third_is_split_within_its_motion():
     rec = _record(_moves(3000, 0, 1000))
-    notes = []
-    n = validation_start(rec, ["j"], notes)
+    n, why = validation_start(rec, ["j"])
     first, last = motion_span(rec, ["j"])
     assert first < 20 and 950 <= last <= 1000                       # the sweep's ends, within the noise band
     assert n == first + round((last - first) * ESTIMATION_SHARE)
     assert holds_still(rec.angles["j"][1800:]) and not holds_still(rec.angles["j"][n:])
-    assert len(notes) == 1 and "validation part" in notes[0] and "holds still" in notes[0]
+    assert "validation part" in why and "holds still" in why
 
 
 def test_a_record_still_until_late_is_split_within_its_motion_too():
     rec = _record(_moves(3000, 2000, 3000))
-    notes = []
-    n = validation_start(rec, ["j"], notes)
-    assert 2000 < n < 3000 and "estimation part" in notes[0]
+    n, why = validation_start(rec, ["j"])
+    assert 2000 < n < 3000 and "estimation part" in why
     assert not holds_still(rec.angles["j"][:n])
 
 
@@ -60,8 +57,7 @@ def test_a_slow_creep_in_the_validation_part_is_motion():
     """A hold that creeps (a leak) by more than the still span is not still: the default split stays."""
     q = _moves(3000, 0, 1000)
     q[1000:] = np.linspace(0.0, 40 * SIGMA, 2000)
-    notes = []
-    assert validation_start(_record(q), ["j"], notes) == 1800 and notes == []
+    assert validation_start(_record(q), ["j"]) == (1800, "")
 
 
 def test_only_the_diagnosed_joints_count():
@@ -70,8 +66,8 @@ def test_only_the_diagnosed_joints_count():
     both = Record("synthetic", still_late.time, np.zeros((3000, 2)),
                   {"j": still_late.angles["j"], "k": _moves(3000, 0, 3000)}, {}, ["j", "k"], ["j", "k"],
                   {"j": 0.0, "k": 0.0})
-    assert validation_start(both, ["j", "k"], []) == 1800
-    assert validation_start(both, ["j"], []) < 1000
+    assert validation_start(both, ["j", "k"]) == (1800, "")
+    assert validation_start(both, ["j"])[0] < 1000
 
 
 def test_a_closed_loop_record_that_ends_still_is_diagnosed_on_its_motion(cli, tmp_path):
@@ -89,6 +85,8 @@ def test_a_closed_loop_record_that_ends_still_is_diagnosed_on_its_motion(cli, tm
     assert proc.returncode == 0, proc.stderr
     d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
     assert d["validation"]["start_s"] < 12.0
-    assert any("holds still on every diagnosed joint" in n for n in d["data"]["notes"])
+    moved = d["validation"]["moved"]
+    assert "holds still on every diagnosed joint" in moved and moved in d["data"]["notes"]
+    assert f"validated on: {moved}" in proc.stdout                  # the terminal says why, beside the fits
     assert d["verdict"] == "discrepancy" and [(s["effect"], s["joint"]) for s in d["selected"]] == [("deadband", "j2")]
     assert d["selected"][0]["params"]["width"] == pytest.approx(0.8, rel=0.05)

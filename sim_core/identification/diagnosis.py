@@ -81,6 +81,7 @@ class Diagnosis:
     channel_ceilings: dict = field(default_factory=dict)   # joint -> channel -> noise ceiling (fit, %)
     restart_s: float | None = None   # the validation angle restarts from the record this often (closed loop)
     detectable: list[dict] = field(default_factory=list)   # detectability.shown: what the record could show
+    split_moved: str = ""   # why the validation part is not the record's last 40 % ("" where it is)
 
     @property
     def verdict(self) -> str:
@@ -116,7 +117,7 @@ class Diagnosis:
             },
             "validation": {"source": self.validation.source, "first_sample": self.split,
                            "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split),
-                           "angle_restart_s": self.restart_s},
+                           "angle_restart_s": self.restart_s, "moved": self.split_moved or None},
             "calibration": self.calibration,
             "closed_loop": bool(self.closed_loop.get("closed_loop", False)),
             "closed_loop_evidence": self.closed_loop,
@@ -175,16 +176,19 @@ def _numerics_again(model, fast: Runner, vfast: Runner, vprob: oe.Problem, rec: 
     return fast, vfast
 
 
-def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int]:
+def _split(rec: Record, val: Record | None, targets: list[str],
+           notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int, str]:
     """Estimation and validation problems: the first 60 % and the last 40 % of a single record (of its
-    motion where a part of that holds still: validation_split.py), or the whole record and the whole
-    validation record."""
+    motion where a part of that holds still: validation_split.py, whose reason is the last item, "" for
+    the default split), or the whole record and the whole validation record."""
     if val is None:
-        n = validation_start(rec, targets, notes)
+        n, moved = validation_start(rec, targets)
+        if moved:
+            notes.append(moved)
         n_est = min(n, MAX_ESTIMATION_SAMPLES)
         if n_est < n:
             notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of the {n} before the validation part")
-        return (oe.Problem(rec, targets, n=n_est), oe.Problem(rec, targets, start=n), rec, n)
+        return (oe.Problem(rec, targets, n=n_est), oe.Problem(rec, targets, start=n), rec, n, moved)
     missing = [f"q_{j}" for j in targets if j not in val.angles]
     if missing:
         raise ValueError(f"--validation {val.source}: no column {', '.join(missing)} (the estimation record's measured, "
@@ -193,7 +197,7 @@ def _split(rec: Record, val: Record | None, targets: list[str], notes: list[str]
     if n_est < rec.n:
         notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of {rec.source}")
     return (oe.Problem(rec, targets, n=n_est),
-            oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0)
+            oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0, "")
 
 
 def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
@@ -241,7 +245,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if share > 0.05:
             notes.append(f"{j}: {100 * share:.0f} % of the samples are within {END_STOP_MARGIN:g} "
                          f"{column_unit(f'q_{j}', spec)} of a joint limit (end-stop contact)")
-    est, vprob, vrec, split = _split(rec, val, targets, notes)
+    est, vprob, vrec, split, split_moved = _split(rec, val, targets, notes)
     m0 = model_spec(spec)
 
     # numerics for the many candidate fits, checked on this record
@@ -287,7 +291,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             notes.append(command_hold.note(hold))
         if hold["replay"] == command_hold.PERIOD_MEAN:
             rec, val = moving, (None if val is None else command_hold.replayed(val, hold_joints))
-            est, vprob, vrec, split = _split(rec, val, targets, [])
+            est, vprob, vrec, split, split_moved = _split(rec, val, targets, [])
             fast, vfast = m_fast, Runner(vrec, fast.substep)
             accurate, vaccurate = Runner(rec), Runner(vrec)
             cal = m_cal
@@ -717,7 +721,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
                      {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings,
-                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None, shows)
+                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None, shows, split_moved)
 
 
 def _score(fits: dict, joints: list[str]) -> float:

@@ -75,13 +75,16 @@ def noise_std(y: np.ndarray) -> float:
     """Robust estimate of white measurement noise from second differences.
 
     For a smooth motion sampled fast, the second difference is dominated by noise (variance 6
-    sigma^2); the median absolute deviation ignores the steps and reversals.
+    sigma^2); the median absolute deviation ignores the steps and reversals. A quantised reading's
+    second differences sit on the quantum's lattice, where a plain median moves in whole quanta
+    (5 where the noise gives 5.4 is 7 % low); the grouped median interpolates within its quantum.
     """
     y = np.asarray(y, dtype=float)
     if y.size < 5:
         return 0.0
     d2 = np.diff(y, 2)
-    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    # readings written with ten significant digits tie to about 1e-9 of their size, not exactly
+    mad = grouped_median(np.abs(d2 - np.median(d2)), floor=0.0, tol=1e-7 * float(np.max(np.abs(y))))
     sigma = 1.4826 * mad / math.sqrt(6.0)
     if sigma == 0.0:
         # quantised and mostly still: use the quantisation step seen in the data
@@ -90,6 +93,40 @@ def noise_std(y: np.ndarray) -> float:
         if steps.size:
             sigma = float(np.min(steps)) / math.sqrt(12.0)
     return sigma
+
+
+#: share of the samples tied at the median above which the values are taken as a lattice's
+LATTICE_TIES = 0.01
+
+
+def grouped_median(a: np.ndarray, floor: float | None = None, tol: float | None = None) -> float:
+    """Median of ``a``, interpolated within its lattice step where ``a`` takes few distinct values.
+
+    The grouped-data median: the median value ``m`` stands for the bin ``m +- h/2`` (``h`` the gap to
+    the nearest distinct value), and the median is placed in it by the share of the samples below
+    and at it. Where no more than ``LATTICE_TIES`` of the samples tie at the median (a continuous
+    signal) this is the plain median. ``floor`` bounds the bin below (0 for absolute values); values
+    within ``tol`` of each other tie (default: 1e-9 of the largest).
+    """
+    a = np.asarray(a, dtype=float).ravel()
+    m = float(np.median(a))
+    if a.size < 3:
+        return m
+    if tol is None:
+        tol = 1e-9 * float(np.max(np.abs(a)))
+    at = np.abs(a - m) <= tol
+    n_at = int(np.count_nonzero(at))
+    if n_at <= max(2, LATTICE_TIES * a.size):
+        return m
+    below, above = a[a < m - tol], a[a > m + tol]
+    gaps = [m - float(below.max())] if below.size else []
+    gaps += [float(above.min()) - m] if above.size else []
+    if not gaps:
+        return m
+    h = min(gaps)
+    lo = m - 0.5 * h if floor is None else max(floor, m - 0.5 * h)
+    hi = m + 0.5 * h
+    return lo + (0.5 * a.size - below.size) / n_at * (hi - lo)
 
 
 def fit_ceiling(y: np.ndarray, sigma: float) -> float:

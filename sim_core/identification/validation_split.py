@@ -39,24 +39,24 @@ def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
     return (first, last) if first < last else (0, rec.n)
 
 
-def validation_start(rec: Record, joints: list[str], notes: list[str]) -> int:
-    """First validation sample of ``rec`` (``joints``: the diagnosed ones); where the default split
-    leaves a part that holds still, the one at ``ESTIMATION_SHARE`` of the motion, said in ``notes``."""
+def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
+    """First validation sample of ``rec`` (``joints``: the diagnosed ones) and why it is not the
+    default one ("" where it is); where the default split leaves a part that holds still, the sample at
+    ``ESTIMATION_SHARE`` of the motion."""
     n = int(round(rec.n * ESTIMATION_SHARE))
     joints = [j for j in joints if j in rec.angles]
     parts = {"estimation": slice(0, n), "validation": slice(n, rec.n)}
     still = [name for name, part in parts.items()
              if joints and all(holds_still(rec.angles[j][part]) for j in joints)]
     if not still:
-        return n
+        return n, ""
     first, last = motion_span(rec, joints)
     moved = first + int(round((last - first) * ESTIMATION_SHARE))
     if moved == n or not 0 < moved < rec.n:
-        return n
+        return n, ""
     t = rec.time
-    notes.append(f"the {' and the '.join(still)} part{'s' if len(still) > 1 else ''} of the default split "
+    return moved, (f"the {' and the '.join(still)} part{'s' if len(still) > 1 else ''} of the default split "
                  f"(validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} of the record) "
                  f"hold{'' if len(still) > 1 else 's'} still on every diagnosed joint: the joints move from "
                  f"{t[first]:.1f} s to {t[last - 1]:.1f} s, so validation starts at {t[moved]:.1f} s, "
                  f"{ESTIMATION_SHARE:.0%} into the motion (or pass --validation OTHER.csv)")
-    return moved
