@@ -205,6 +205,26 @@ def test_forward_stops_at_max_effects():
     assert len(fw.accepted) == 2 and fw.stopped == "reached 2 effects"
 
 
+def test_the_effect_limit_is_per_diagnosed_joint():
+    """Four joints whose valves share one overlap: each joint's deadband passes in every round, and all
+    four are named under the limit of four joints; under one joint's limit the fourth is left out."""
+    from sim_core.identification.selection import effect_limit
+    joints = ["j1", "j2", "j3", "j4"]
+    cands = [cand("deadband", j) for j in joints]
+
+    def every_round(pool, model, have, r):
+        return [judged(scored(c, gain=10.0 - joints.index(c.joint))) for c in pool]
+
+    def named(limit):
+        fw = dc.forward(cands, frozenset(), evaluate_round=every_round, extend=lambda m, ev: m | {ev.candidate.label},
+                        score=lambda m: 0.0, ceiling=100.0, max_effects=limit)
+        return [e.candidate.joint for e in fw.accepted], fw.stopped
+
+    assert effect_limit(joints) == 4 * dc.MAX_EFFECTS and effect_limit([]) == dc.MAX_EFFECTS
+    assert named(effect_limit(joints)) == (joints, "no candidates left")
+    assert named(effect_limit(["j1"])) == (joints[:dc.MAX_EFFECTS], f"reached {dc.MAX_EFFECTS} effects")
+
+
 # ---- other first picks when the greedy path misses the record ------------------------------------------
 def restarted(scores, misfit=True, ceiling=100.0):
     """forward() then restart() on a table where the greedy pick A (10 points) leads nowhere and B (8)
@@ -627,6 +647,36 @@ def test_backward_keeps_effects_worth_the_threshold():
     evs = [scored(A), scored(B)]
     model, kept = dc.backward(evs, "AB", 90.0, lambda m, ev, rest: ("x", 87.9))
     assert kept == evs and model == "AB"
+
+
+def test_backward_judges_an_effect_on_the_joints_it_acts_on():
+    """Ten joints, a deadband on each of two: removing j1's costs 18 points on j1 and nothing on the
+    other nine, 1.8 points of the ten joints' mean, under the threshold; its gain joined on j1's
+    score, and on that scale it is kept. Without ``score_on`` the mean is the scale, and it goes."""
+    d1, d2 = cand("deadband", "j1"), cand("deadband", "j2")
+    evs = [scored(d1), scored(d2)]
+    lost = {d1.label: 18.0, d2.label: 25.0}              # points on the effect's own joint
+
+    def joint_scores(model):
+        return {f"j{k}": 90.0 - sum(v for lab, v in lost.items() if lab not in model and lab.endswith(f"@j{k}"))
+                for k in range(1, 11)}
+
+    def mean(model):
+        return float(np.mean(list(joint_scores(model).values())))
+
+    def refit_without(model, ev, rest):
+        m = frozenset(e.candidate.label for e in rest)
+        return m, mean(m)
+
+    def score_on(model, ev):
+        return joint_scores(model)[ev.candidate.joint]
+
+    full = frozenset(lost)
+    assert mean(full) - mean(full - {d1.label}) == pytest.approx(1.8)
+    model, kept = dc.backward(list(evs), full, mean(full), refit_without, score_on=score_on)
+    assert kept == evs and model == full
+    model, kept = dc.backward([scored(d1), scored(d2)], full, mean(full), refit_without)
+    assert [e.candidate.joint for e in kept] == ["j2"]
 
 
 def test_backward_removes_a_pair_named_together_as_a_unit():

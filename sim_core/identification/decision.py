@@ -17,7 +17,8 @@ The rules, in the order they apply:
   on the validation data (it fitted what the estimation window alone shows);
 * forward selection (:func:`forward`): each round every remaining candidate is refitted with what
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
-  when nothing passes, at ``max_effects``, or when the score is within 2 points of its noise ceiling;
+  when nothing passes, at ``max_effects`` (3 per diagnosed joint), or when the score is within 2
+  points of its noise ceiling;
 * below the floor (:func:`best_explaining`): when nothing passes while the model misses the record
   (more than 2 points under its noise ceiling, residual tests failing), a candidate that fails only
   the 2-point floor, closes 85 % of the distance to the ceiling and whitens the residual joins;
@@ -25,7 +26,7 @@ The rules, in the order they apply:
   residual tests fail, the most promising pairs (by the sum of their single validation gains and,
   taking turns, by the sum of their estimation-fit improvements; at most 15) are fitted jointly; a pair that passes (each member identified) joins as two effects named together;
 * backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
-  less than 2 points is dropped (an early pick can stand in for effects named later); a pair named
+  less than 2 points on the joints it acts on is dropped (an early pick can stand in for effects named later); a pair named
   together is removed together (each alone is absorbed by the refit, by definition);
 * exchange pass (:func:`exchange`): each effect named before the last is refitted against the
   strongest rivals of its round once the later effects are in the model; a rival that passes there
@@ -62,7 +63,7 @@ THRESHOLD_POINTS = 2.0      # smallest validation gain that counts (research not
 NOISE_FACTOR = 3.0          # ... or 3 x the noise spread of the gain, when larger
 SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
 AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
-MAX_EFFECTS = 3
+MAX_EFFECTS = 3             # effects named per diagnosed joint (selection.effect_limit)
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
 WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
@@ -653,11 +654,14 @@ def simpler_parameters(accepted: list[Evaluation], model, full: float, *, defaul
 
 # ---- backward pass and final check ----------------------------------------------------------------------
 def backward(accepted: list[Evaluation], model, full: float, refit_without: Callable, log=None,
-             misses: Callable | None = None):
+             misses: Callable | None = None, score_on: Callable | None = None):
     """Drop an accepted effect whose removal (the others refitted) costs less than the threshold:
     an early pick can be a stand-in for effects named later. ``full``: the score of ``model``;
     ``refit_without(model, ev, rest)`` -> (model without ``ev``, the rest refitted; its score); for the
-    members of a pair named together ``ev`` is the pair's evaluation. ``misses(model)``: whether a
+    members of a pair named together ``ev`` is the pair's evaluation. ``score_on(model, ev)``: the
+    score on the joints ``ev`` acts on, the scale its gain was judged on when it joined (a deadband
+    on one of ten joints moves the ten joints' mean by a tenth of what it moves its own); None: the
+    removal's cost is taken on ``full``'s scale. ``misses(model)``: whether a
     model would be reported as not explaining the record (:func:`misses_record`); an effect without
     which the model misses the record, where with it it does not, is kept whatever its points (the
     score is a mean over channels: a leak that closes the rest of a chamber-pressure misfit is worth
@@ -673,7 +677,7 @@ def backward(accepted: list[Evaluation], model, full: float, refit_without: Call
         rest = [e for e in accepted if not any(e is u for u in unit)]
         what = unit[0].pair or unit[0]          # ``refit_without`` gets the pair's evaluation for a pair
         minus, s = refit_without(model, what, rest)
-        drop = full - s
+        drop = full - s if score_on is None else score_on(model, what) - score_on(minus, what)
         if drop < THRESHOLD_POINTS and misses is not None and misses(minus) and not misses(model):
             log(f"backward: kept {what.candidate.label} (removing it costs {drop:.2f} points and leaves the record "
                 f"unexplained)")

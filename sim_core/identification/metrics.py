@@ -83,8 +83,12 @@ def noise_std(y: np.ndarray) -> float:
     if y.size < 5:
         return 0.0
     d2 = np.diff(y, 2)
+    a = np.abs(d2 - np.median(d2))
+    mad = float(np.median(a))
     # readings written with ten significant digits tie to about 1e-9 of their size, not exactly
-    mad = grouped_median(np.abs(d2 - np.median(d2)), floor=0.0, tol=1e-7 * float(np.max(np.abs(y))))
+    tol = 1e-7 * float(np.max(np.abs(y)))
+    if mad > tol:       # at zero (the noise under one quantum) the quantum itself is the estimate, below
+        mad = grouped_median(a, floor=0.0, tol=tol)
     sigma = 1.4826 * mad / math.sqrt(6.0)
     if sigma == 0.0:
         # quantised and mostly still: use the quantisation step seen in the data

@@ -361,12 +361,21 @@ class Selection:
     channel_ceilings: dict[str, dict[str, float]] = field(default_factory=dict)   # joint -> channel -> ceiling
 
 
+def effect_limit(joints: list[str]) -> int:
+    """The most effects a diagnosis names: ``MAX_EFFECTS`` per diagnosed joint. Each joint has its own
+    valve, actuator and sensor, so a robot whose every valve has the same overlap carries one
+    deadband per joint; a limit for the whole record would name three of ten and leave the record
+    unexplained."""
+    return MAX_EFFECTS * max(1, len(joints))
+
+
 def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, progress: bool = True,
-           max_effects: int = MAX_EFFECTS, log=None, backend=None, recalibrate=None, misfit=None,
+           max_effects: int | None = None, log=None, backend=None, recalibrate=None, misfit=None,
            stand_ins: dict[str, list[FreeParameter]] | None = None, checkpoint: Callable | None = None) -> Selection:
     """Greedy forward selection, the masked-pair search, the backward and the exchange pass
     (decision.forward, decision.backward, decision.exchange) with the simulator-based steps: a round
     of candidate fits, pair fits, the validation score, a refit without one effect.
+    ``max_effects``: the most effects named (None: :func:`effect_limit` of the validated joints).
     ``recalibrate(model, ev, score)``: the model once ``ev``'s effect is in it, its calibration redone (it may
     change ``st.calib_keys`` in place; ``score(model)`` is the validation score, to judge the redone one
     by); None: the model as extended. ``misfit(validation outputs)``: whether the model's residual tests fail (the
@@ -376,6 +385,8 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
     callable that puts the caller's state that ``recalibrate`` changes back as it was at the call
     (decision.restart runs forward selection again from other first picks)."""
     log = log or (lambda msg: None)
+    if max_effects is None:
+        max_effects = effect_limit(st.val.joints)
     ceilings = channel_ceilings(st, st.val.joints)
     ceiling = score_ceiling(ceilings)
     base = _Baseline(st)
@@ -461,8 +472,12 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return refits[(id(model), id(ev))][2]
 
+        def score_on(model, ev):
+            fits = st.val.fits(base.outputs(model))
+            return float(np.mean([fits[j]["score"] for j in affected_joints(ev.candidate, st.val.joints)]))
+
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log,
-                                    misses=None if misfit is None else misses)
+                                    misses=None if misfit is None else misses, score_on=score_on)
         if len(accepted) >= 2:
             before = list(accepted)
             model, accepted, tried = exchange(
