@@ -8,7 +8,7 @@ import pytest
 
 from sim_core.dataset import write_csv
 from sim_core.identification.record import ESTIMATION_SHARE, Record, holds_still
-from sim_core.identification.validation_split import motion_span, validation_start
+from sim_core.identification.validation_split import SMOOTH_SAMPLES, motion_span, validation_start
 from sim_core.model.spec import load_robot
 
 from closed_loop_sim import closed_loop_columns, step_reference
@@ -40,10 +40,23 @@ def test_a_record_still_after_its_first_third_is_split_within_its_motion():
     rec = _record(_moves(3000, 0, 1000))
     n, why = validation_start(rec, ["j"])
     first, last = motion_span(rec, ["j"])
-    assert first < 20 and 950 <= last <= 1000                       # the sweep's ends, within the noise band
+    # the sweep's ends, within the noise band (and half the smoothing window)
+    assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
     assert n == first + round((last - first) * ESTIMATION_SHARE)
     assert holds_still(rec.angles["j"][1800:]) and not holds_still(rec.angles["j"][n:])
     assert "validation part" in why and "holds still" in why
+
+
+def test_a_noise_draw_in_a_long_hold_is_not_motion():
+    """Ten joints sweep for 1000 samples and hold for 5000: among 50000 held samples of white noise
+    some fall 4-5 sigmas from a level read off five samples. The motion ends with the sweeps, not at
+    the hold's largest noise draw."""
+    n = 6000
+    angles = {f"j{k}": _record(_moves(n, 0, 1000), seed=k).angles["j"] for k in range(10)}
+    rec = Record("synthetic", np.arange(n) / RATE, np.zeros((n, 10)), angles, {}, list(angles), list(angles),
+                 {j: 0.0 for j in angles})
+    first, last = motion_span(rec, list(angles))
+    assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
 
 
 def test_a_record_still_until_late_is_split_within_its_motion_too():

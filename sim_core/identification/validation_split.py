@@ -8,30 +8,36 @@ one a fraction of a degree off scores thousands of points below, and a clean rec
 unexplained. So where either part of the default split holds still on every diagnosed joint
 (``record.holds_still``, the rule a record's commanded joints are checked by), the split is put at
 ``ESTIMATION_SHARE`` of the record's motion instead: from the first sample at which any joint has
-left the reading it starts at, to the last at which any is still away from the one it ends at (by
-more than ``STILL_SPAN / 2`` noise sigmas). The still parts stay in the record: a hold can show a
+left the reading it starts at, to the last at which any is still away from the one it ends at (its
+mean over ``SMOOTH_SAMPLES`` samples by more than ``STILL_SPAN / 2`` noise sigmas: one sample
+beyond 5 sigmas of a level read off 5 samples is a noise draw that a record of ten joints holding
+for thousands of samples makes likely, and it would put the end of the motion there). The still parts stay in the record: a hold can show a
 leak's creep, and the other part still has the motion.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 
 from .metrics import noise_std
 from .record import ESTIMATION_SHARE, STILL_SPAN, Record, holds_still
 
 LEVEL_SAMPLES = 5     # samples whose median is the reading a joint starts or ends at
+SMOOTH_SAMPLES = 9    # samples averaged before a reading is compared with those (its noise / 3)
 
 
 def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
     """(first, last + 1) sample at which any of ``joints`` is away from its starting, or its ending,
-    reading by more than ``STILL_SPAN / 2`` noise sigmas; (0, n) where none moves."""
+    reading (its mean over ``SMOOTH_SAMPLES``) by more than ``STILL_SPAN / 2`` noise sigmas; (0, n)
+    where none moves."""
     first, last = rec.n, 0
     for j in joints:
         q = rec.angles[j]
         band = 0.5 * STILL_SPAN * noise_std(q)
-        away_from_start = np.flatnonzero(np.abs(q - np.median(q[:LEVEL_SAMPLES])) > band)
-        away_from_end = np.flatnonzero(np.abs(q - np.median(q[-LEVEL_SAMPLES:])) > band)
+        mean = uniform_filter1d(q, SMOOTH_SAMPLES, mode="nearest")
+        away_from_start = np.flatnonzero(np.abs(mean - np.median(q[:LEVEL_SAMPLES])) > band)
+        away_from_end = np.flatnonzero(np.abs(mean - np.median(q[-LEVEL_SAMPLES:])) > band)
         if away_from_start.size:
             first = min(first, int(away_from_start[0]))
         if away_from_end.size:
