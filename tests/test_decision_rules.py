@@ -198,6 +198,32 @@ def test_forward_stops_within_two_points_of_the_noise_ceiling():
     assert dc.near_ceiling(98.1, 100.0) and not dc.near_ceiling(97.9, 100.0)
 
 
+def test_forward_goes_on_while_one_joint_is_short_of_its_own_ceiling():
+    """Ten joints, each with a deadband; nine named leave the mean score 1.7 points under the mean
+    ceiling (the tenth joint 17 under its own). With the joints' own ceilings the tenth is named;
+    on the mean the search stops short of it."""
+    joints = [f"j{k}" for k in range(10)]
+    cands = [cand("deadband", j) for j in joints]
+
+    def every_round(pool, model, have, r):
+        return [judged(scored(c, gain=30.0 - joints.index(c.joint))) for c in pool]
+
+    def short(model):                   # each joint 17 points under its ceiling until its deadband is in
+        return max(17.0 * (f"deadband@{j}" not in model) for j in joints)
+
+    def mean_score(model):
+        return 100.0 - 17.0 * sum(f"deadband@{j}" not in model for j in joints) / len(joints)
+
+    def named(**kw):
+        fw = dc.forward(cands, frozenset(), evaluate_round=every_round, extend=lambda m, ev: m | {ev.candidate.label},
+                        score=mean_score, ceiling=100.0, max_effects=30, **kw)
+        return len(fw.accepted), fw.stopped
+
+    assert cands[0].label == "deadband@j0"
+    assert named(short_of_ceiling=short) == (10, "score 100.0 within 2 points of its noise ceiling 100.0")
+    assert named() == (9, "score 98.3 within 2 points of its noise ceiling 100.0")
+
+
 def test_forward_stops_at_max_effects():
     table = {(E, A.label): (10.0, -5.0), (E, B.label): (3.0, -1.0), (E, C.label): (3.0, -1.0),
              (frozenset({A.label}), B.label): (5.0, -1.0), (frozenset({A.label}), C.label): (0.5, -1.0)}

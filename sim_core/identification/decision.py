@@ -17,8 +17,8 @@ The rules, in the order they apply:
   on the validation data (it fitted what the estimation window alone shows);
 * forward selection (:func:`forward`): each round every remaining candidate is refitted with what
   is accepted (a large effect masks the others), the passing one with the largest gain joins; stop
-  when nothing passes, at ``max_effects`` (3 per diagnosed joint), or when the score is within 2
-  points of its noise ceiling;
+  when nothing passes, at ``max_effects`` (3 per diagnosed joint), or when every joint's score is
+  within 2 points of its noise ceiling;
 * below the floor (:func:`best_explaining`): when nothing passes while the model misses the record
   (more than 2 points under its noise ceiling, residual tests failing), a candidate that fails only
   the 2-point floor, closes 85 % of the distance to the ceiling and whitens the residual joins;
@@ -322,7 +322,7 @@ def member_evaluations(pair_ev: Evaluation) -> list[Evaluation]:
 def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: Callable, score: Callable,
             ceiling: float, max_effects: int = MAX_EFFECTS, log=None, evaluate_pairs: Callable | None = None,
             misfit: Callable | None = None, first: tuple[list[Evaluation], Evaluation] | None = None,
-            explains: Callable | None = None) -> Forward:
+            explains: Callable | None = None, short_of_ceiling: Callable | None = None) -> Forward:
     """Greedy forward selection, with the masked-pair search.
 
     ``evaluate_round(pool, model, accepted, round)`` fits and judges every candidate of ``pool`` on
@@ -335,8 +335,15 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
     take from them) instead of fitting that round and taking its best (:func:`other_starts`).
     ``explains(ev)``: whether with ``ev`` the residual tests pass and the model no longer misses the
     record; under the same conditions as the pair search, and before it, a single candidate that
-    explains the record below the 2-point floor is taken (:func:`best_explaining`). None: not tried."""
+    explains the record below the 2-point floor is taken (:func:`best_explaining`). None: not tried.
+    ``short_of_ceiling(model)``: the points by which the joint furthest below its own noise ceiling
+    misses it; the search goes on while that is the threshold or more (a deadband on one of ten
+    joints is worth a tenth of its points to their mean). None: the mean score against ``ceiling``."""
     log = log or (lambda msg: None)
+
+    def near(model, s):
+        return near_ceiling(s, ceiling) if short_of_ceiling is None else short_of_ceiling(model) < THRESHOLD_POINTS
+
     accepted: list[Evaluation] = []
     rounds: list[list[Evaluation]] = []
     pairs_tried: list[list[Evaluation]] = []
@@ -346,7 +353,7 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
     for r in range(1, max_effects + 1):
         if r > 1:
             s = score(model)
-            if near_ceiling(s, ceiling):
+            if near(model, s):
                 stopped = f"score {s:.1f} within {THRESHOLD_POINTS:g} points of its noise ceiling {ceiling:.1f}"
                 at_ceiling = True
                 break
@@ -363,7 +370,7 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         if best is None:
             # the model misses the record: far from its noise ceiling, the residual tests failing
             s = score(model)
-            missed = not near_ceiling(s, ceiling) and (misfit is None or misfit(model))
+            missed = not near(model, s) and (misfit is None or misfit(model))
             if explains is not None and misfit is not None and missed:
                 best = best_explaining(evals, s, ceiling, explains)
         if best is None:

@@ -444,11 +444,17 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             return False
         return not misses_record(ev.fits, ceiling, ceilings, False, baseline_fits())
 
+    joint_ceilings = {j: float(np.mean(list(ch.values()))) for j, ch in ceilings.items()}
+
+    def short_of_ceiling(m):
+        fits = st.val.fits(base.outputs(m))
+        return max(joint_ceilings[j] - fits[j]["score"] for j in joint_ceilings)
+
     def run(first=None):
         return forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
                        score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
                        evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first,
-                       explains=None if misfit is None else explains)
+                       explains=None if misfit is None else explains, short_of_ceiling=short_of_ceiling)
 
     try:
         to_start = snapshot()
