@@ -911,6 +911,25 @@ def test_the_same_effect_elsewhere_decides_by_other_poses():
     assert dc.ambiguous(win, scored(cand("payload", "j2"), gain=10.0)) is False
 
 
+def test_a_candidate_on_another_joint_is_no_rival():
+    """Ten joints whose valves share one overlap: the deadbands of two joints gain alike, each on its
+    own joint's score; neither explains the other's misfit, so neither makes the other ambiguous. A
+    payload on a link outside the record's joints acts on the winner's joint too, and stays a rival."""
+    d1, d2 = cand("deadband", "j1"), cand("deadband", "j2")
+    win = scored(d1, gain=50.0)
+    round_ = [win, scored(d2, gain=49.0), scored(cand("valve_asymmetry", "j1"), gain=30.0)]
+    targets = ["j1", "j2"]
+
+    def acts_on(c):
+        return [c.joint] if c.joint in targets else targets
+
+    assert dc.rivalry(win, round_, False)["ambiguous"] is True            # every candidate of the round
+    r = dc.rivalry(win, round_, False, acts_on)
+    assert r["ambiguous"] is False and r["runner_up"]["effect"] == "valve_asymmetry"
+    p = dc.rivalry(win, round_ + [scored(cand("payload", "j6"), gain=48.0)], False, acts_on)
+    assert p["ambiguous"] is True and p["runner_up"]["effect"] == "payload"
+
+
 # ---- the readable scale --------------------------------------------------------------------------
 def test_gain_as_share_of_the_baseline_residual():
     assert dc.residual_explained_pct(2.0, 80.0) == pytest.approx(10.0)

@@ -736,15 +736,19 @@ def ambiguous(winner: Evaluation, runner_up: Evaluation) -> bool:
     return runner_up.gain >= AMBIGUITY * winner.gain and runner_up.key != winner.key
 
 
-def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: bool) -> dict:
+def rivalry(winner: Evaluation, round_evals: list[Evaluation], have_pressures: bool,
+            acts_on: Callable | None = None) -> dict:
     """The runner-up of the winner's round, whether the choice is ambiguous, and what would decide.
 
     When it is, ``rivals`` lists every candidate of the round within the margin (the runner-up first,
     then by gain), each with what would decide it from the winner: on a position-only record several
     effects can set the same speeds per volt (a valve asymmetry, an area ratio, a payload and a
     Coulomb friction within 0.02 points of each other), and naming only the runner-up hides that the
-    named one is one of four."""
-    others = [e for e in round_evals if e is not winner]
+    named one is one of four. ``acts_on(candidate)``: the joints a candidate's gain is taken on; a
+    candidate on none of the winner's is no rival (a deadband on another joint, whose gain is on
+    that joint's score, explains another misfit, not this one). None: every candidate of the round."""
+    mine = None if acts_on is None else set(acts_on(winner.candidate))
+    others = [e for e in round_evals if e is not winner and (mine is None or mine & set(acts_on(e.candidate)))]
     if not others:
         return {}
     ru = max(others, key=lambda e: e.gain)

@@ -523,6 +523,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     ext_fits = _fits_all(vprob, ext_out, vrec, split)
     timings["final"] = time.perf_counter() - t_start
 
+    def acts_on(c):         # the joints a candidate's gain is taken on: its rivals are on them
+        return affected_joints(c, vprob.joints)
+
     selected = []
     for i, ev in enumerate(sel.accepted):
         c = ev.candidate
@@ -559,13 +562,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             item["elasticity_to_held"] = elasticity
             item["conditional_on"] = sorted({k for row in elasticity.values() for k in conditional.conditional_on(row)})
         if ev.pair is None:
-            item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures))
+            item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures, acts_on))
         else:
             partner = next(m for m in ev.pair.candidate.members if m is not c)
             item["named_together_with"] = {"effect": partner.effect, "joint": partner.joint}
             item["alone"] = ev.pair.candidate.alone.get(c.label, {})
             tried = next((pe for pe in sel.pairs if any(p is ev.pair for p in pe)), [ev.pair])
-            item.update(rivalry(ev.pair, tried, rec.has_pressures))
+            item.update(rivalry(ev.pair, tried, rec.has_pressures, acts_on))
         selected.append(item)
 
     candidates = []
