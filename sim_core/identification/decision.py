@@ -36,8 +36,9 @@ The rules, in the order they apply:
   worth 2 points, else the weakest is dropped and the rest refitted; when the search had stopped
   near the noise ceiling because of a dropped effect, the pair search it skipped runs then
   (:func:`pairs_after_a_drop`), and a passing pair goes through the final check in turn;
-* ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain flags
-  the choice ambiguous, with the measurement that would decide (``decided_by``);
+* ambiguity (:func:`rivalry`): a runner-up of another effect within 20 % of the winner's gain, on
+  the winner's joints, flags the choice ambiguous, with the measurement that would decide
+  (``decided_by``);
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
   (extended or not) still misses the record by far (an angle fit below zero, more than 10 points
   under the noise ceiling with failing residual tests, or the velocity more than 10 points under
