@@ -26,8 +26,9 @@ The rules, in the order they apply:
   residual tests fail, the most promising pairs (by the sum of their single validation gains and,
   taking turns, by the sum of their estimation-fit improvements; at most 15) are fitted jointly; a pair that passes (each member identified) joins as two effects named together;
 * backward pass (:func:`backward`): an accepted effect whose removal (the others refitted) costs
-  less than 2 points on the joints it acts on is dropped (an early pick can stand in for effects named later); a pair named
-  together is removed together (each alone is absorbed by the refit, by definition);
+  less than 2 points on the joints it acts on is dropped (an early pick can stand in for effects
+  named later); a pair named together is removed together (each alone is absorbed by the refit, by
+  definition);
 * exchange pass (:func:`exchange`): each effect named before the last is refitted against the
   strongest rivals of its round once the later effects are in the model; a rival that passes there
   and beats it by 0.5 points (or 3 x the rival's noise spread) takes its place (a greedy first pick
