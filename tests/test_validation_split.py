@@ -83,20 +83,26 @@ def test_only_the_diagnosed_joints_count():
     assert validation_start(both, ["j"])[0] < 1000
 
 
-def test_a_closed_loop_record_that_ends_still_is_diagnosed_on_its_motion(cli, tmp_path):
-    """HydroLek's shoulder with a 0.8 V deadband under a P loop, set-point steps for 12 s and then none
-    for 18 s: the default validation part (from 18 s) holds still, and a model that is right fits its
-    noise near 0 %, one slightly off thousands of points below; split within the motion, the deadband
-    is named."""
+def _stepped_then_still(cli, tmp_path, deadband: float | None):
+    """HydroLek's shoulder under a P loop, set-point steps for 12 s of 30 and then none, through
+    ``diagnose``; returns (the process, diagnosis.json)."""
     spec = load_robot("hydrolek")
-    spec.enable_effect("deadband", "j2", width=0.8)
+    if deadband:
+        spec.enable_effect("deadband", "j2", width=deadband)
     r = step_reference(spec, "j2", 30.0, RATE, seed=3)
     r[int(12 * RATE):] = r[int(12 * RATE) - 1]
     write_csv(tmp_path / "idle.csv", closed_loop_columns(spec, "j2", kp=15.0, duration=30.0, seed=3, reference=r))
     proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "idle.csv", "--report", tmp_path / "rep",
                "--effects", "deadband", "delay", "leakage", "--quiet")
     assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    return proc, json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+
+
+def test_a_closed_loop_record_that_ends_still_is_diagnosed_on_its_motion(cli, tmp_path):
+    """HydroLek's shoulder with a 0.8 V deadband, stepped for 12 s and then still for 18 s: the default
+    validation part (from 18 s) holds still, and a model that is right fits its noise near 0 %, one
+    slightly off thousands of points below; split within the motion, the deadband is named."""
+    proc, d = _stepped_then_still(cli, tmp_path, 0.8)
     assert d["validation"]["start_s"] < 12.0
     moved = d["validation"]["moved"]
     assert "holds still on every diagnosed joint" in moved and moved in d["data"]["notes"]
@@ -110,12 +116,5 @@ def test_the_same_record_without_the_deadband_is_clean(cli, tmp_path):
     16-bit noise is a large share of what is left to fit, the noise ceiling rests on the noise
     estimate; a median of second differences held to whole quanta put it 7 % low and the record
     read unexplained (the score 2.6 points under a ceiling set too high)."""
-    spec = load_robot("hydrolek")
-    r = step_reference(spec, "j2", 30.0, RATE, seed=3)
-    r[int(12 * RATE):] = r[int(12 * RATE) - 1]
-    write_csv(tmp_path / "idle.csv", closed_loop_columns(spec, "j2", kp=15.0, duration=30.0, seed=3, reference=r))
-    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "idle.csv", "--report", tmp_path / "rep",
-               "--effects", "deadband", "delay", "leakage", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    _, d = _stepped_then_still(cli, tmp_path, None)
     assert d["validation"]["moved"] and d["verdict"] == "no_significant_discrepancy", d["unexplained"]
