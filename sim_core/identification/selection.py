@@ -218,10 +218,16 @@ def noise_spread(st: Setting, out_c: Outputs, out_0: Outputs, joints: list[str],
     return float(np.std(gains))
 
 
+def joint_ceilings(ceilings: dict[str, dict[str, float]]) -> dict[str, float]:
+    """Per joint, the best decision score a perfect model could reach: the mean of its channels'
+    ceilings (:func:`channel_ceilings`)."""
+    return {j: float(np.mean(list(ch.values()))) for j, ch in ceilings.items()}
+
+
 def score_ceiling(ceilings: dict[str, dict[str, float]]) -> float:
     """Best decision score a perfect model could reach on the validation data, given the noise: the
-    mean over joints of the mean of their channels' ceilings (:func:`channel_ceilings`)."""
-    return float(np.mean([float(np.mean(list(ch.values()))) for ch in ceilings.values()]))
+    mean over joints of :func:`joint_ceilings`."""
+    return float(np.mean(list(joint_ceilings(ceilings).values())))
 
 
 def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, float]]:
@@ -434,7 +440,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         return base_fits[0]
 
     def misses(m):
-        return misses_record(st.val.fits(base.outputs(m)), ceiling, ceilings, model_misfit(m), baseline_fits())
+        return misses_record(base.fits(m), ceiling, ceilings, model_misfit(m), baseline_fits())
 
     def explains(ev):
         """Whether the model with ``ev`` (its validation outputs) passes the residual tests and does
@@ -444,11 +450,11 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             return False
         return not misses_record(ev.fits, ceiling, ceilings, False, baseline_fits())
 
-    joint_ceilings = {j: float(np.mean(list(ch.values()))) for j, ch in ceilings.items()}
+    per_joint = joint_ceilings(ceilings)
 
     def short_of_ceiling(m):
-        fits = st.val.fits(base.outputs(m))
-        return max(joint_ceilings[j] - fits[j]["score"] for j in joint_ceilings)
+        fits = base.fits(m)
+        return max(per_joint[j] - fits[j]["score"] for j in per_joint)
 
     def run(first=None):
         return forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
@@ -479,7 +485,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             return refits[(id(model), id(ev))][2]
 
         def score_on(model, ev):
-            fits = st.val.fits(base.outputs(model))
+            fits = base.fits(model)
             return float(np.mean([fits[j]["score"] for j in affected_joints(ev.candidate, st.val.joints)]))
 
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log,
@@ -622,6 +628,7 @@ class _Baseline:
         self.st = st
         self._out: dict[int, tuple] = {}
         self._fits: dict[int, tuple] = {}
+        self._val_fits: dict[int, tuple] = {}
 
     def fitted(self, res: oe.FitResult) -> oe.FitResult:
         """Remember ``res.spec``'s estimation-window outputs (the fit's, at its optimum); returns ``res``."""
@@ -642,8 +649,17 @@ class _Baseline:
             _keep_last(self._out, self.KEEP)
         return hit[1]
 
+    def fits(self, model) -> dict:
+        """The validation fits of ``model`` (joint -> channel -> fit, with its "score"), each computed once."""
+        hit = self._val_fits.get(id(model))
+        if hit is None or hit[0] is not model:
+            hit = (model, self.st.val.fits(self.outputs(model)))
+            self._val_fits[id(model)] = hit
+            _keep_last(self._val_fits, self.KEEP)
+        return hit[1]
+
     def score(self, model) -> float:
-        return mean_score(self.st.val.fits(self.outputs(model)))
+        return mean_score(self.fits(model))
 
     def cost(self, model) -> float:
         st = self.st

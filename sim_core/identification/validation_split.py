@@ -11,8 +11,8 @@ unexplained. So where either part of the default split holds still on every diag
 left the reading it starts at, to the last at which any is still away from the one it ends at (its
 mean over ``SMOOTH_SAMPLES`` samples by more than ``STILL_SPAN / 2`` noise sigmas: one sample
 beyond 5 sigmas of a level read off 5 samples is a noise draw that a record of ten joints holding
-for thousands of samples makes likely, and it would put the end of the motion there). The still parts stay in the record: a hold can show a
-leak's creep, and the other part still has the motion.
+for thousands of samples makes likely, and it would put the end of the motion there). The still
+parts stay in the record: a hold can show a leak's creep, and the other part still has the motion.
 """
 
 from __future__ import annotations
