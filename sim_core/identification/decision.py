@@ -223,7 +223,8 @@ def best_passing(evals: list[Evaluation]) -> Evaluation | None:
     return max(ok, key=lambda e: e.gain) if ok else None
 
 
-def best_explaining(evals: list[Evaluation], score: float, ceiling: float, explains: Callable) -> Evaluation | None:
+def best_explaining(evals: list[Evaluation], score: float, ceiling: float, explains: Callable,
+                    gap_on: Callable | None = None) -> Evaluation | None:
     """The candidate that explains a record the model misses although its gain is under the 2-point
     floor, or None. Called where no candidate of a round passes while the model misses the record
     (the residual tests fail and its ``score`` is more than the threshold under its noise
@@ -235,13 +236,19 @@ def best_explaining(evals: list[Evaluation], score: float, ceiling: float, expla
     record. This is forward selection's side of what the backward pass and the final check already
     do (an effect without which the model misses the record is kept whatever its points); without
     it the verdict said the bank had nothing for a misfit that one of its candidates removes. The
-    largest gain among those wins; the floor's reason is replaced by ``explains_record``."""
-    gap = ceiling - score
-    ok = [e for e in evals if e.short_of_floor and len(e.reasons) == 1 and e.gain >= EXPLAINED_SHARE * gap
+    largest gain among those wins; the floor's reason is replaced by ``explains_record``.
+    ``gap_on(ev)``: the model's distance to the noise ceiling on the joints ``ev`` acts on, the scale
+    its gain is taken on (a leak on one of four joints closes its own joint's distance, a quarter of
+    the four's mean); None: ``ceiling - score``."""
+    def gap_of(e):
+        return ceiling - score if gap_on is None else gap_on(e)
+
+    ok = [e for e in evals if e.short_of_floor and len(e.reasons) == 1 and e.gain >= EXPLAINED_SHARE * gap_of(e)
           and explains(e)]
     if not ok:
         return None
     best = max(ok, key=lambda e: e.gain)
+    gap = gap_of(best)
     best.explains_record = (f"accepted below the {THRESHOLD_POINTS:g}-point floor ({best.gain:+.2f} points): the model "
                             f"without it misses the record (its residual tests fail, {gap:.2f} points under the noise "
                             f"ceiling), with it the residual tests pass ({100 * best.gain / gap:.0f} % of that distance "
@@ -261,7 +268,13 @@ def recalibration_kept(before: float, after: float) -> bool:
 
 def mean_score(fits: dict[str, dict[str, float]]) -> float:
     """A model's validation score: the mean over joints of their decision scores."""
-    return float(np.mean([f["score"] for f in fits.values()]))
+    return score_over(fits)
+
+
+def score_over(fits: dict[str, dict[str, float]], joints: list[str] | None = None) -> float:
+    """The mean decision score over ``joints`` (None: every joint): the scale of a decision about an
+    effect, on the joints it acts on."""
+    return float(np.mean([fits[j]["score"] for j in (fits if joints is None else joints)]))
 
 
 def near_ceiling(score: float, ceiling: float) -> bool:
@@ -324,7 +337,8 @@ def member_evaluations(pair_ev: Evaluation) -> list[Evaluation]:
 def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: Callable, score: Callable,
             ceiling: float, max_effects: int = MAX_EFFECTS, log=None, evaluate_pairs: Callable | None = None,
             misfit: Callable | None = None, first: tuple[list[Evaluation], Evaluation] | None = None,
-            explains: Callable | None = None, short_of_ceiling: Callable | None = None) -> Forward:
+            explains: Callable | None = None, short_of_ceiling: Callable | None = None,
+            gap_on: Callable | None = None) -> Forward:
     """Greedy forward selection, with the masked-pair search.
 
     ``evaluate_round(pool, model, accepted, round)`` fits and judges every candidate of ``pool`` on
@@ -340,7 +354,8 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
     explains the record below the 2-point floor is taken (:func:`best_explaining`). None: not tried.
     ``short_of_ceiling(model)``: the points by which the joint furthest below its own noise ceiling
     misses it; the search goes on while that is the threshold or more (a deadband on one of ten
-    joints is worth a tenth of its points to their mean). None: the mean score against ``ceiling``."""
+    joints is worth a tenth of its points to their mean). None: the mean score against ``ceiling``.
+    ``gap_on(model, ev)``: that distance on the joints ``ev`` acts on, for :func:`best_explaining`."""
     log = log or (lambda msg: None)
 
     def near(model, s):
@@ -374,7 +389,8 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
             s = score(model)
             missed = not near(model, s) and (misfit is None or misfit(model))
             if explains is not None and misfit is not None and missed:
-                best = best_explaining(evals, s, ceiling, explains)
+                best = best_explaining(evals, s, ceiling, explains,
+                                       None if gap_on is None else (lambda e, m=model: gap_on(m, e)))
         if best is None:
             stopped = "no candidate passed" if r == 1 else "no further candidate passed"
             if evaluate_pairs is None or len(accepted) + 2 > max_effects or not missed:
@@ -479,7 +495,8 @@ def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_cei
 
 def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Forward, model, *,
                        evaluate_pairs: Callable | None, score: Callable, ceiling: float, misfit: Callable | None = None,
-                       max_effects: int = MAX_EFFECTS, log=None) -> tuple[list[Evaluation], Evaluation | None]:
+                       max_effects: int = MAX_EFFECTS, log=None,
+                       short_of_ceiling: Callable | None = None) -> tuple[list[Evaluation], Evaluation | None]:
     """The pair search that forward selection skipped because an effect brought the model within the
     threshold of its noise ceiling, run once the final check has dropped that effect (the reason to
     stop is gone with it). ``model``: the search's model without the dropped effects, ``kept``: what the
@@ -487,10 +504,14 @@ def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Fo
     one among them (not worth the threshold alone, it may be with a partner), under the same
     conditions as in :func:`forward` (the model not near its ceiling, its residual tests failing,
     room for two more). An effect the exchange pass put in counts from the round of the one it
-    replaced. Returns the pair evaluations and the passing pair's evaluation (or None)."""
+    replaced. ``short_of_ceiling(model)``: as in :func:`forward` (the joint furthest below its own
+    ceiling); None: the mean score against ``ceiling``. Returns the pair evaluations and the passing
+    pair's evaluation (or None)."""
     log = log or (lambda msg: None)
-    if (not dropped or not fw.at_ceiling or evaluate_pairs is None or len(kept) + 2 > max_effects
-            or near_ceiling(score(model), ceiling) or (misfit is not None and not misfit(model))):
+    if not dropped or not fw.at_ceiling or evaluate_pairs is None or len(kept) + 2 > max_effects:
+        return [], None
+    short = ceiling - score(model) if short_of_ceiling is None else short_of_ceiling(model)
+    if short < THRESHOLD_POINTS or (misfit is not None and not misfit(model)):
         return [], None
     r = min((ev.in_place_of or ev).round for ev in dropped)
     taken = {e.key for e in kept}
@@ -514,7 +535,7 @@ def exchange_rivals(ev: Evaluation, round_evals: list[Evaluation], accepted: lis
 
 def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, full: float, *,
              refit_without: Callable, evaluate: Callable, score_with: Callable, replace: Callable, score: Callable,
-             log=None):
+             log=None, scale: Callable | None = None):
     """Refit each effect named before the last against its round's strongest rivals, with the effects
     named after it in the model: greedy selection takes a round's best single with what the model held
     then, and an effect named later can make a rival the better explanation (a valve asymmetry stands
@@ -527,8 +548,10 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
     ``full``); ``replace(model, ev)`` -> that model. A rival takes the place when it passes the
     acceptance rules on the model without the effect and its model scores more than
     max(EXCHANGE_POINTS, 3 x its noise spread) above ``full``; ``score(model)`` is then the new
-    ``full``. Each rival's ``in_place_of`` is the effect it was fitted for. Returns (model, accepted,
-    the rivals' Evaluations of each effect tried)."""
+    ``full``. ``scale(model, ev, rival)`` -> (the score of ``model``, that of the rival's model), both
+    on the joints either acts on (a rival on the effect's joint of ten wins a tenth of its points on
+    the ten's mean); None: ``full`` and ``score_with(rival)``. Each rival's ``in_place_of`` is the
+    effect it was fitted for. Returns (model, accepted, the rivals' Evaluations of each effect tried)."""
     log = log or (lambda msg: None)
     accepted = list(accepted)
     tried: list[list[Evaluation]] = []
@@ -551,15 +574,15 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
         for e in evals:
             if e.accepted_ok and e is not best:
                 e.reasons.append(f"{best.candidate.label} gains more in place of {ev.candidate.label}")
-        s = score_with(best)
+        before, s = (full, score_with(best)) if scale is None else scale(model, ev, best)
         margin = max(EXCHANGE_POINTS, NOISE_FACTOR * best.spread)
-        if not s - full > margin:
-            best.reasons.append(f"in place of {ev.candidate.label} its model scores {s - full:+.2f} points, "
+        if not s - before > margin:
+            best.reasons.append(f"in place of {ev.candidate.label} its model scores {s - before:+.2f} points, "
                                 f"not more than {margin:.2f}")
             continue
-        log(f"exchange: {best.candidate.label} replaces {ev.candidate.label} ({full:.2f} -> {s:.2f} points)")
+        log(f"exchange: {best.candidate.label} replaces {ev.candidate.label} ({before:.2f} -> {s:.2f} points)")
         ev.reasons.append(f"exchanged for {best.candidate.label}: with the effects named after it in the model, "
-                          f"{best.candidate.label} in its place scores {s - full:+.2f} points more")
+                          f"{best.candidate.label} in its place scores {s - before:+.2f} points more")
         accepted = [best if e is ev else e for e in accepted]
         model = replace(minus, best)
         full = score(model)
@@ -568,7 +591,7 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
 
 # ---- stand-ins ----------------------------------------------------------------------------------------------
 def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Callable, refit_instead: Callable,
-             log=None):
+             log=None, score_on: Callable | None = None):
     """A named effect must explain the record better than a nominal parameter with its signature (a
     stand-in, calibration.STAND_IN_FOR) calibrated in its place: where the model with the stand-in
     freed instead scores within THRESHOLD_POINTS of ``full``, what the effect explained is a
@@ -581,9 +604,10 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
 
     ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
     ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
-    refitted, its score, the value ``p`` took, the bound it stops at or None). A member of a pair
-    named together stays (the pair was judged as one). Returns (model, accepted, [(ev, p, value, its
-    model's score, full)] replaced)."""
+    refitted, its score, the value ``p`` took, the bound it stops at or None). ``score_on(model, ev)``:
+    the score on the joints ``ev`` acts on, the scale its gain was judged on (as in :func:`backward`);
+    None: the scores as given. A member of a pair named together stays (the pair was judged as one).
+    Returns (model, accepted, [(ev, p, value, its model's score, full)] replaced)."""
     log = log or (lambda msg: None)
     accepted = list(accepted)
     found = []
@@ -593,26 +617,27 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
         for p in stand_ins(ev):
             rest = [e for e in accepted if e is not ev]
             alt, s, value, bound = refit_instead(model, ev, rest, p)
+            loss = full - s if score_on is None or not math.isfinite(s) else score_on(model, ev) - score_on(alt, ev)
             declared = getattr(p, "declared", None)
             if bound is None and declared is not None:
                 bound = p.within_declared(value)
-            if full - s >= THRESHOLD_POINTS or bound is not None:
+            if loss >= THRESHOLD_POINTS or bound is not None:
                 log(f"stand-in: {ev.candidate.label} stays ({getattr(p, 'key', p)} = {value:.4g}"
                     + (f" at its {bound} bound" if bound in ("lower", "upper") else f", {bound}" if bound else "")
-                    + f", {s - full:+.2f} points)")
+                    + f", {-loss:+.2f} points)")
                 continue
-            if declared is not None and s - full < THRESHOLD_POINTS:
+            if declared is not None and -loss < THRESHOLD_POINTS:
                 # a parameter beyond the range its user declared, as good but not better: the user's
                 # range is a statement about the rig as much as the bank's effects are, so the effect
                 # stays and says the record does not tell them apart
                 log(f"stand-in: {ev.candidate.label} stays, as well explained by {p.key} = {value:.4g} beyond its "
-                    f"declared range ({s - full:+.2f} points)")
+                    f"declared range ({-loss:+.2f} points)")
                 ev.as_well_beyond_range.append({"parameter": p.key, "value": value, "declared_range": list(declared),
                                                 "score": round(s, 3), "score_with_effect": round(full, 3)})
                 continue
             log(f"stand-in: {ev.candidate.label} replaced by a calibration ({full:.2f} -> {s:.2f} points)")
             ev.reasons.append(f"not named: a calibration in its place ({getattr(p, 'key', p)} = {value:.4g}) explains the "
-                              f"record as well ({s - full:+.2f} points; an effect must win by {THRESHOLD_POINTS:g})")
+                              f"record as well ({-loss:+.2f} points; an effect must win by {THRESHOLD_POINTS:g})")
             found.append((ev, p, value, s, full))
             accepted, model, full = rest, alt, s
             break
@@ -627,7 +652,7 @@ def secondary(ev: Evaluation) -> list:
 
 
 def simpler_parameters(accepted: list[Evaluation], model, full: float, *, default: Callable, refit_held: Callable,
-                       log=None):
+                       log=None, score_on: Callable | None = None):
     """A named effect's secondary parameter must be worth the threshold as the effect is: held at the
     effect's default (``default(ev, p)``: its typical value, none to tank for a leak, or None where it
     has none) with the rest refitted (``refit_held(model, ev, p, value)`` -> (that model, its score,
@@ -635,8 +660,10 @@ def simpler_parameters(accepted: list[Evaluation], model, full: float, *, defaul
     calibration keeps at nominal what the record does not identify. Two parameters the record cannot
     tell apart (a leak across the piston and one to tank, on a record without chamber pressures)
     then give one value for the leak the record shows, in the principal parameter, instead of a split
-    the noise decides. Returns (model, its score, [(ev, parameter, value, score with it held)]); each
-    ``ev`` held there keeps ``held_at_default`` and a candidate without that parameter."""
+    the noise decides. ``score_on(model, ev)``: the score on the joints ``ev`` acts on (as in
+    :func:`backward`); None: the scores as given. Returns (model, its score, [(ev, parameter, value,
+    score with it held)]); each ``ev`` held there keeps ``held_at_default`` and a candidate without
+    that parameter."""
     log = log or (lambda msg: None)
     held = []
     for ev in accepted:
@@ -646,10 +673,11 @@ def simpler_parameters(accepted: list[Evaluation], model, full: float, *, defaul
                 continue
             alt, s, values = refit_held(model, ev, p, value)
             name = p.key.split(".")[-1]
-            if full - s >= THRESHOLD_POINTS:
-                log(f"{ev.candidate.label}: {name} stays ({s - full:+.2f} points held at {value:g})")
+            loss = full - s if score_on is None or not math.isfinite(s) else score_on(model, ev) - score_on(alt, ev)
+            if loss >= THRESHOLD_POINTS:
+                log(f"{ev.candidate.label}: {name} stays ({-loss:+.2f} points held at {value:g})")
                 continue
-            log(f"{ev.candidate.label}: {name} held at its default {value:g} ({s - full:+.2f} points; a "
+            log(f"{ev.candidate.label}: {name} held at its default {value:g} ({-loss:+.2f} points; a "
                 f"parameter must be worth {THRESHOLD_POINTS:g})")
             ev.candidate = replace(ev.candidate, free=[fp for fp in ev.candidate.free if fp.key != p.key],
                                    fixed={**ev.candidate.fixed, name: value})
@@ -828,10 +856,13 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
-    if not why and named is False and gap > THRESHOLD_POINTS and residual_fails:
-        why.append(f"nothing in the bank explains the misfit the residual tests show: the model's score {score:.1f} "
-                   f"is {gap:.1f} points below its noise ceiling {ceiling:.1f}, more than the {THRESHOLD_POINTS:g} "
-                   f"points a named cause must gain")
+    short = joint_shortfall(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else None
+    if not why and named is False and residual_fails and (short[1] if short else gap) > THRESHOLD_POINTS:
+        where = (f"on {short[0]} the model's score {short[2]:.1f} is {short[1]:.1f} points below its noise ceiling "
+                 f"{short[3]:.1f}" if short and len(channel_fits) > 1 else
+                 f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f}")
+        why.append(f"nothing in the bank explains the misfit the residual tests show: {where}, more than the "
+                   f"{THRESHOLD_POINTS:g} points a named cause must gain")
     if base_channel_fits and channel_fits and channel_ceilings:
         for j, fits in channel_fits.items():
             c = channel_ceilings.get(j, {}).get("pressure")
@@ -847,6 +878,24 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
                            f"{left:.1f} points below its noise ceiling {c:.1f}); a cause must close "
                            f"{100 * EXPLAINED_SHARE:.0f} % of a misfit the residual tests do not see")
     return why
+
+
+def joint_shortfall(channel_fits: dict[str, dict[str, float]],
+                    channel_ceilings: dict[str, dict[str, float]]) -> tuple[str, float, float, float] | None:
+    """(joint, points, score, ceiling) of the joint furthest below its own noise ceiling: its score
+    (the mean of its channel fits) against the mean of its channels' ceilings. A misfit on one of ten
+    joints moves their mean by a tenth, so the record is judged joint by joint; on one joint this is
+    the record's score against its ceiling. None without a joint whose channels have ceilings."""
+    best = None
+    for j, fits in channel_fits.items():
+        chans = [c for c in fits if c in channel_ceilings.get(j, {})]
+        if not chans:
+            continue
+        f = float(np.mean([fits[c] for c in chans]))
+        c = float(np.mean([channel_ceilings[j][k] for k in chans]))
+        if best is None or not c - f <= best[1]:
+            best = (j, c - f, f, c)
+    return best
 
 
 def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],

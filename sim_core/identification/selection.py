@@ -42,7 +42,7 @@ from . import step_timing
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, mean_score, member_evaluations, misses_record,
-                       pairs_after_a_drop, restart, simpler_parameters, stand_in)
+                       pairs_after_a_drop, restart, score_over, simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, declared, free_parameter
 from .progress import RoundProgress
@@ -456,11 +456,22 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         fits = base.fits(m)
         return max(per_joint[j] - fits[j]["score"] for j in per_joint)
 
+    def acts_on(ev):
+        return affected_joints(ev.candidate, st.val.joints)
+
+    def score_on(model, ev):
+        """The validation score on the joints ``ev`` acts on: the scale its gain is taken on."""
+        return score_over(base.fits(model), acts_on(ev))
+
+    def gap_on(model, ev):
+        return float(np.mean([per_joint[j] for j in acts_on(ev)])) - score_on(model, ev)
+
     def run(first=None):
         return forward(cands, base_spec, evaluate_round=evaluate_round, extend=extend,
                        score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
                        evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first,
-                       explains=None if misfit is None else explains, short_of_ceiling=short_of_ceiling)
+                       explains=None if misfit is None else explains, short_of_ceiling=short_of_ceiling,
+                       gap_on=gap_on)
 
     try:
         to_start = snapshot()
@@ -484,9 +495,10 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             refits[(id(model), id(ev))] = (model, ev, (res.spec, base.score(res.spec)))
             return refits[(id(model), id(ev))][2]
 
-        def score_on(model, ev):
-            fits = base.fits(model)
-            return float(np.mean([fits[j]["score"] for j in affected_joints(ev.candidate, st.val.joints)]))
+        def scale(model, ev, rival):
+            """The model's score and the rival's model's, on the joints either acts on."""
+            joints = list(dict.fromkeys(acts_on(ev) + acts_on(rival)))
+            return score_over(base.fits(model), joints), score_over(rival.fits, joints)
 
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log,
                                     misses=None if misfit is None else misses, score_on=score_on)
@@ -497,7 +509,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                 evaluate=lambda pool, minus, rest, r: evaluate_round(
                     pool, minus, [(e.candidate, e.effect_params()) for e in rest], r),
                 score_with=lambda ev: mean_score(ev.fits),
-                replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log)
+                replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log, scale=scale)
             rounds += tried
             swaps = [(old, new) for old, new in zip(before, accepted) if old is not new]
             if swaps:
@@ -510,7 +522,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 
         model, accepted, replaced = stand_in(accepted, model, base.score(model),
                                              stand_ins=lambda ev: stand_ins.get(ev.candidate.effect, []),
-                                             refit_instead=refit_instead, log=log)
+                                             refit_instead=refit_instead, log=log, score_on=score_on)
         for ev, fp, value, _, _ in replaced:
             if fp.key not in st.calib_keys:
                 st.calib_keys.append(fp.key)
@@ -524,7 +536,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
 
         model, _, held = simpler_parameters(accepted, model, base.score(model),
                                             default=lambda ev, p: effect_default(base_spec, p),
-                                            refit_held=refit_held, log=log)
+                                            refit_held=refit_held, log=log, score_on=score_on)
         for ev, p, value, _ in held:
             stopped += f"; {ev.candidate.label}: {p.key.split('.')[-1]} held at its default {value:g}, not worth a parameter"
     values: dict[str, float] = {}
@@ -541,7 +553,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
         pevals, best = pairs_after_a_drop(
             kept, dropped, fw, reduced, evaluate_pairs=None if misfit is None else evaluate_pairs, score=base.score,
             ceiling=ceiling, misfit=None if misfit is None else (lambda m: misfit(base.outputs(m))),
-            max_effects=max_effects, log=log)
+            max_effects=max_effects, log=log, short_of_ceiling=short_of_ceiling)
         if not pevals:
             return None
         sel.pairs.append(pevals)
