@@ -21,7 +21,8 @@ The rules, in the order they apply:
   within 2 points of its noise ceiling;
 * below the floor (:func:`best_explaining`): when nothing passes while the model misses the record
   (more than 2 points under its noise ceiling, residual tests failing), a candidate that fails only
-  the 2-point floor, closes 85 % of the distance to the ceiling and whitens the residual joins;
+  the 2-point floor, closes 85 % of the distance to the ceiling on its joints and whitens the
+  residual joins;
 * masked pairs (:func:`rank_pairs`, :func:`forward`): when no single candidate passes but the model's
   residual tests fail, the most promising pairs (by the sum of their single validation gains and,
   taking turns, by the sum of their estimation-fit improvements; at most 15) are fitted jointly; a pair that passes (each member identified) joins as two effects named together;
@@ -31,7 +32,8 @@ The rules, in the order they apply:
   definition);
 * exchange pass (:func:`exchange`): each effect named before the last is refitted against the
   strongest rivals of its round once the later effects are in the model; a rival that passes there
-  and beats it by 0.5 points (or 3 x the rival's noise spread) takes its place (a greedy first pick
+  and beats it by 0.5 points (or 3 x the rival's noise spread) on the joints either acts on takes
+  its place (a greedy first pick
   can be the best single stand-in for a cause that only shows beside an effect named later);
 * final check (:func:`final_check`): in the refitted final model each named effect must still be
   worth 2 points, else the weakest is dropped and the rest refitted; when the search had stopped
@@ -45,10 +47,13 @@ The rules, in the order they apply:
   under the noise ceiling with failing residual tests, or the velocity more than 10 points under
   its ceiling with a white residual), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
-  misfit on it, or when nothing is named while the score sits more than 2 points under the ceiling
-  with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when effects
-  are named,
-  ``no_significant_discrepancy`` otherwise.
+  misfit on it, or when nothing is named while a joint's score sits more than 2 points under its
+  ceiling with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when
+  effects are named, ``no_significant_discrepancy`` otherwise.
+
+Every rule that weighs points weighs them on the joints in question (the candidate's, the effect's,
+each joint's own ceiling): on a record of ten joints the mean moves by a tenth of what one joint's
+effect moves its own. On a record of one joint each is the record's score.
 """
 
 from __future__ import annotations
