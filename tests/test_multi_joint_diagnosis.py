@@ -61,3 +61,34 @@ def test_a_misfit_on_one_joint_of_four_that_no_effect_explains_is_unexplained(cl
     assert "nothing in the bank explains" in why and "on j2" in why, why
     mean_gap = d["unexplained"]["score_ceiling"] - d["unexplained"]["score"]
     assert mean_gap < 2.0           # the record's mean alone would have said the model matches it
+
+
+def test_a_candidate_on_one_joint_of_several_refits_what_acts_on_that_joint():
+    """Each joint has its own valve and actuator: a deadband tried on j2 refits j2's calibrated flow gain
+    and an effect named on j2, with the robot-wide ones (a bulk modulus, the supply), and leaves j1's
+    where the model has them. A payload beyond the diagnosed joints acts on all of them; on one joint
+    nothing is left out."""
+    from sim_core.identification.candidates import bank
+    from sim_core.identification.selection import affected_joints, free_list, key_joint
+    from sim_core.model.spec import load_robot
+
+    spec = load_robot("hydrolek")
+    cands = {c.label: c for c in bank(spec, ["j1", "j2"], effects=["deadband", "bulk_modulus", "payload"])}
+    calib = ["joints.j1.valve.rated_flow", "joints.j2.valve.rated_flow", "supply.pressure"]
+    accepted = [(cands["deadband@j1"], {}), (cands["payload@j2"], {}), (cands["bulk_modulus"], {})]
+
+    def freed(label, joints):
+        on = affected_joints(cands[label], joints)
+        keys = [fp.key for fp in free_list(spec, cands[label], [a for a in accepted if a[0].label != label],
+                                           calib, on=None if set(on) >= set(joints) else on)]
+        return keys
+
+    assert freed("deadband@j2", ["j1", "j2"]) == [
+        "effects.deadband.j2.width", "effects.payload.j2.mass", "effects.bulk_modulus.scale",
+        "effects.bulk_modulus.air_pressure", "joints.j2.valve.rated_flow", "supply.pressure"]
+    assert "joints.j1.valve.rated_flow" in freed("payload@j6", ["j1", "j2"])       # beyond them: all
+    assert "effects.deadband.j1.width" in freed("payload@j6", ["j1", "j2"])
+    assert freed("deadband@j2", ["j2"]) == [fp.key for fp in free_list(          # one joint: all
+        spec, cands["deadband@j2"], accepted, calib)] and len(freed("deadband@j2", ["j2"])) == 1 + 4 + 3
+    assert [key_joint(k) for k in ("joints.j4.valve.rated_flow", "effects.leakage.j4.internal",
+                                   "effects.bulk_modulus.scale", "supply.pressure")] == ["j4", "j4", None, None]
