@@ -627,9 +627,9 @@ def _extend(model, ev: Evaluation, recalibrate):
 
 
 def _polished(st: Setting, model, accepted: list[tuple[Candidate, dict]], base: "_Baseline", side: SideBySide):
-    """``model`` with its own parameters (the accepted effects' and the calibration's) refitted the way
-    each candidate of the next round refits them: from their values and, for a rig's nuisances, from
-    their values before calibration, with the candidates' budget. Without it the next round credits
+    """``model`` with its own parameters (the accepted effects' and the calibration's, every joint's)
+    refitted the way each candidate of the next round refits those of its joints: from their values
+    and, for a rig's nuisances, from their values before calibration, with the candidates' budget. Without it the next round credits
     every candidate alike with what this refit alone finds (the accepted fit stopped on its budget, or
     the other start holds a better optimum). Kept where it scores higher on the validation data:
     returns the model and (score before, score after), or the model unchanged and None."""
