@@ -35,6 +35,24 @@ def test_a_ladder_turns_to_the_bound_farther_from_the_null():
     assert v == sorted(v, reverse=True)                 # nearest the null first
 
 
+def test_a_named_value_turns_the_ladder_to_its_own_side_of_the_null():
+    """A spec's 1.2 V deadband (the harvester's valves) in a search range of 0-4.5 V: a deadband named
+    at 0.8 V is narrower than the spec's, so what the record shows of it is found from 1.2 V down;
+    the ladder up to 4.5 V said "from about 1.6 V" beside it. A value on the far side, or none, keeps
+    the ladder to the farther bound; so does a value at the null."""
+    fp = FreeParameter("effects.deadband.swing.width", 0.0, 4.5, null=1.2)
+    down = detectability.rungs(fp, toward=0.8)
+    assert down[-1] == pytest.approx(0.0) and down == sorted(down, reverse=True) and down[0] < 1.2
+    assert down[0] == pytest.approx(1.2 - 1.2 / 2 ** 7)
+    assert detectability.rungs(fp, toward=2.0) == detectability.rungs(fp) == detectability.rungs(fp, toward=1.2)
+    assert detectability.rungs(fp)[-1] == pytest.approx(4.5)
+    offset = FreeParameter("effects.valve_offset.j2.offset", -1.5, 1.5, null=0.0)
+    assert detectability.rungs(offset, toward=-0.3)[-1] == pytest.approx(-1.5)
+    leak = FreeParameter("effects.leakage.j2.internal", 1e-15, 3e-10, log=True, null=2e-12)
+    assert detectability.rungs(leak, toward=5e-13)[-1] == pytest.approx(1e-15)
+    assert detectability.rungs(leak, toward=5e-11)[-1] == pytest.approx(3e-10)
+
+
 def test_a_log_ladder_takes_sixteenths_of_the_range():
     fp = FreeParameter("effects.coulomb_friction.j2.torque", 0.1, 1e4, log=True, null=0.0)
     v = detectability.rungs(fp)
@@ -133,3 +151,24 @@ def test_a_valve_offset_is_named_above_what_the_record_shows_and_not_below(cli, 
         assert own["named"] and own["shows_from"] is not None
         assert 0.25 * row["shows_from"] <= own["shows_from"] <= 4.0 * row["shows_from"]
         assert not any(r["named"] for r in got["detectable"]["effects"] if r["effect"] != "valve_offset")
+
+
+def test_a_deadband_named_narrower_than_the_specs_is_searched_below_it(cli, tmp_path):
+    """The harvester's valves carry a 1.2 V deadband in the spec; a swing valve with 0.5 V is named
+    narrower, and what the record shows of it is searched from 1.2 V down to 0, not up to 4.5 V
+    (which said "from about 1.6 V" beside a named 0.5 V)."""
+    cli("excite", "--robot", "harvester", "--joint", "swing", "--duration", 20, "--rate", 100, "--seed", 3,
+        "--out", tmp_path / "in.csv", check=True)
+    cli("simulate", "--robot", "harvester", "--input", tmp_path / "in.csv", "--out", tmp_path / "m.csv",
+        "--effect", "deadband:joint=swing,width=0.5", "--noise-angle", 3e-4, "--seed", 5, check=True)
+    proc = cli("diagnose", "--robot", "harvester", tmp_path / "m.csv", "--report", tmp_path / "rep",
+               "--effects", "deadband", "valve_asymmetry", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("deadband", "swing")]
+    assert d["selected"][0]["params"]["width"] == pytest.approx(0.5, rel=0.05)
+    row = next(r for r in d["detectable"]["effects"] if r["named"])
+    assert row["null"] == pytest.approx(1.2) and row["range_end"] == pytest.approx(0.0)
+    assert row["tested"] and all(t["value"] < 1.2 for t in row["tested"])
+    if row["shows_from"] is not None:
+        assert "none at width = 1.2 V" in proc.stdout

@@ -98,8 +98,9 @@ def run(args):
             print(f"    {line}")
         for row in d.detectable:
             if row.get("named") and (row["effect"], row["joint"]) == (s["effect"], s["joint"]):
-                print(f"    the record shows it from about {detectability.magnitude(row, row['shows_from'])} (estimated, "
-                      f"on the model without it)" if row["shows_from"] is not None else
+                print(f"    the record shows it from about {detectability.magnitude(row, row['shows_from'])}"
+                      f"{detectability.from_spec(row)} (estimated, on the model without it)"
+                      if row["shows_from"] is not None else
                       "    the estimate of what the record shows does not reach it within its range (estimated, on the "
                       "model without it)")
     hold = d.closed_loop.get("command_hold")

@@ -36,14 +36,17 @@ LOG_SHARES = tuple(k / 16 for k in range(1, 17))
 SEED = 20261202                               # the noise drawn on each rung's output (a fixed draw: reproducible)
 
 
-def rungs(fp) -> list[float]:
+def rungs(fp, toward: float | None = None) -> list[float]:
     """The ladder's values of ``fp`` (a candidate's first free parameter), nearest the null first:
-    from its null towards the search bound farther from it in the fit coordinate. [] where the
+    from its null towards the search bound farther from it in the fit coordinate, or, with
+    ``toward`` (a named effect's value), towards the bound on that value's side (a deadband named
+    narrower than the spec's 1.2 V runs down from 1.2, not up to the range's 4.5). [] where the
     parameter has no null."""
     if not has_null(fp):
         return []
     xn = fp.to_x(fp.null)
-    xf = 1.0 if 1.0 - xn >= xn else 0.0
+    xt = math.nan if toward is None else fp.to_x(toward)
+    xf = (0.0 if xt < xn else 1.0) if math.isfinite(xt) and xt != xn else (1.0 if 1.0 - xn >= xn else 0.0)
     return [fp.from_x(xn + s * (xf - xn)) for s in (LOG_SHARES if fp.log else LINEAR_SHARES)]
 
 
@@ -110,8 +113,10 @@ def expected_gain(problem: Problem, base: Outputs, truth: Outputs, jacobian: np.
 
 def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold: float, noise: dict[str, float],
           pressure_noise: dict[str, float], restart: int = 0, side=None) -> list[dict]:
-    """For each candidate of each group ``(model, jacobian, cands, named)`` (effects not in ``model``;
-    ``jacobian`` its calibrated parameters' columns, None: nothing calibrated): its first parameter's
+    """For each candidate of each group ``(model, jacobian, cands, named)`` or ``(model, jacobian,
+    cands, named, values)`` (effects not in ``model``; ``jacobian`` its calibrated parameters' columns,
+    None: nothing calibrated; ``values``: (effect, joint) -> a named effect's first parameter, whose
+    side of the null its ladder runs to): its first parameter's
     ladder searched by bisection for the smallest rung whose expected gain reaches ``threshold``, the
     top rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its
     gain is scored on; ``named`` marks the rows of the effects the diagnosis named (searched on the
@@ -121,13 +126,14 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
     todo = []
     search = _Search(groups, bases, runner, problem, joints_of, threshold, noise, pressure_noise, restart, todo)
     weaker: dict[int, tuple] = {}          # todo index -> (the bound a no-null ladder starts from, its gain)
-    for gi, (_, _, cands, _) in enumerate(groups):
+    for gi, group in enumerate(groups):
+        cands, named_values = group[2], (group[4] if len(group) > 4 else {})
         for c in cands:
             if not c.free:
                 continue
             fp = c.free[0]
             if has_null(fp):
-                values = rungs(fp)
+                values = rungs(fp, named_values.get((c.effect, c.joint)))
             else:
                 # no value where it vanishes: towards the end of the range where it shows more
                 at = {b: search.gain(gi, c, b) for b in (fp.lower, fp.upper)}
@@ -221,7 +227,16 @@ def describe(row: dict, threshold: float) -> str:
         gain = f", {top:+.2f} points there" if top is not None else ""
         return (f"{row['effect']}{where}: not even at {magnitude(row, row['range_end'])} (the far end of "
                 f"its range{gain}, under the {threshold:g} a gain must reach)")
-    return f"{row['effect']}{where}: from about {magnitude(row, row['shows_from'])}"
+    return f"{row['effect']}{where}: from about {magnitude(row, row['shows_from'])}{from_spec(row)}"
+
+
+def from_spec(row: dict) -> str:
+    """Where the ladder of ``row`` starts, said where that is not zero (a spec's own deadband, a valve's
+    ratio of 1): ', none at width = 1.2 V'. A magnitude is read from there."""
+    null = row.get("null")
+    if null is None or null == 0.0 or not math.isfinite(null):
+        return ""
+    return f", none at {magnitude(row, null)}"
 
 
 def _num(v):

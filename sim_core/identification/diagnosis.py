@@ -713,8 +713,12 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     ext_jac = final.jacobian if final is not None and selected else cal_jac
     groups = [(ext_acc, None if ext_jac is None else ext_jac[rows], [c for c in cands if (c.effect, c.joint) not in named], False)]
     if selected:
+        first = {(c.effect, c.joint): c.free[0].key.split(".")[-1] for c in cands if c.free}
+        values = {(s["effect"], s["joint"]): s["params"].get(first.get((s["effect"], s["joint"])))
+                  for s in selected}
         groups.append((base_acc, None if cal_jac is None else cal_jac[rows],
-                       [c for c in cands if (c.effect, c.joint) in named], True))
+                       [c for c in cands if (c.effect, c.joint) in named], True,
+                       {k: v for k, v in values.items() if v is not None}))
     with SideBySide(workers if backend is None else 1) as side:
         shows = detectability.shown(groups, fast, st.grid, lambda c: affected_joints(c, est.joints),
                                     threshold=THRESHOLD_POINTS, noise=noise, pressure_noise=pn_val,

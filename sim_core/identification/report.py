@@ -20,7 +20,7 @@ import numpy as np
 from .. import background_import
 from ..dataset import column_unit
 from ..effects import EFFECTS
-from . import beyond_range, command_hold, conditional
+from . import beyond_range, command_hold, conditional, detectability
 from .closed_loop import RESTART_TAUS
 from .diagnosis import Diagnosis
 from ..params_file import overrides, write_params
@@ -289,7 +289,8 @@ def _detectable_html(det: dict, e) -> str:
            f"<th>joint</th><th>shows from</th><th>far end of the range</th></tr>"]
     for r in rows:
         unit = f" {r['unit']}" if r["unit"] else ""
-        top = "not within the range" if r["shows_from"] is None else f"{r['parameter']} = {_fmt(r['shows_from'])}{unit}"
+        top = ("not within the range" if r["shows_from"] is None
+               else f"{r['parameter']} = {_fmt(r['shows_from'])}{unit}{detectability.from_spec(r)}")
         out.append(f"<tr><td>{e(r['effect'] + (' (named)' if r.get('named') else ''))}</td><td>{e(str(r['joint'] or '-'))}</td>"
                    f"<td class='{'bad' if r['shows_from'] is None else ''}'>{e(top)}</td>"
                    f"<td>{e(_fmt(r['range_end']) + unit)}</td></tr>")
