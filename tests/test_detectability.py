@@ -172,3 +172,32 @@ def test_a_deadband_named_narrower_than_the_specs_is_searched_below_it(cli, tmp_
     assert row["tested"] and all(t["value"] < 1.2 for t in row["tested"])
     if row["shows_from"] is not None:
         assert "none at width = 1.2 V" in proc.stdout
+
+
+def test_a_ladder_that_shows_nothing_on_the_short_window_is_searched_on_the_whole_one(cli, tmp_path):
+    """The shoulder only rises (1.5 V pushes and rests) for the first 9 s of a 30 s record, then
+    steps both ways: a valve asymmetry acts on one direction of the flow, so on the first half of the
+    estimation window (0-9 s) no ratio shows, and a 0.6 valve asymmetry named with 140 points read
+    "does not reach it within its range". On the whole estimation window it shows."""
+    t = np.arange(3000) / 100.0
+    u = np.zeros_like(t)
+    rise = (t >= 1.0) & (t < 9.0)
+    u[rise] = np.where(((t[rise] - 1.0) % 1.0) < 0.5, 1.5, 0.0)
+    steps = t >= 9.0
+    u[steps] = np.repeat(np.random.default_rng(4).choice([-3.0, 3.0], size=steps.sum() // 40 + 1), 40)[: steps.sum()]
+    from sim_core.dataset import write_csv
+    write_csv(tmp_path / "in.csv", {"time": t, "u_j2": u})
+    cli("simulate", "--robot", "hydrolek", "--input", tmp_path / "in.csv", "--out", tmp_path / "m.csv",
+        "--effect", "valve_asymmetry:joint=j2,ratio=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
+    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "m.csv", "--report", tmp_path / "rep",
+               "--effects", "valve_asymmetry", "deadband", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("valve_asymmetry", "j2")]
+    assert d["selected"][0]["params"]["ratio"] == pytest.approx(0.6, rel=0.05)
+    row = next(r for r in d["detectable"]["effects"] if r["named"])
+    assert row["window"] == "the estimation window"
+    assert row["shows_from"] is not None and 0.6 < row["shows_from"] < 1.0
+    # a ladder that shows on the short window stays there
+    other = next(r for r in d["detectable"]["effects"] if r["effect"] == "deadband")
+    assert other["window"] == "the first half of the estimation window" and other["shows_from"] is not None

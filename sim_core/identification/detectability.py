@@ -14,8 +14,9 @@ whose gain reaches the threshold is what the record shows, none: the record cann
 effect within the bank's range. An effect with no value where it vanishes (line dynamics replaces
 the hoses' lumping at any stiffness) is tried at both ends of its range first, and its ladder runs
 from the end where it shows less towards the other. An estimate (first order in the calibrated parameters, one noise
-draw, the first half of the estimation window, where the fits rank their starts; rungs a factor 2
-apart, or 1/16 of a log-scaled range), reported as one.
+draw, the first half of the estimation window, where the fits rank their starts, and the whole
+window for a ladder that shows nothing on that half; rungs a factor 2 apart, or 1/16 of a
+log-scaled range), reported as one.
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ def expected_gain(problem: Problem, base: Outputs, truth: Outputs, jacobian: np.
 
 
 def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold: float, noise: dict[str, float],
-          pressure_noise: dict[str, float], restart: int = 0, side=None) -> list[dict]:
+          pressure_noise: dict[str, float], restart: int = 0, side=None,
+          whole: tuple[Problem, list] | None = None) -> list[dict]:
     """For each candidate of each group ``(model, jacobian, cands, named)`` or ``(model, jacobian,
     cands, named, values)`` (effects not in ``model``; ``jacobian`` its calibrated parameters' columns,
     None: nothing calibrated; ``values``: (effect, joint) -> a named effect's first parameter, whose
@@ -121,7 +123,11 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
     top rung first (none there: not testable within the range). ``joints_of(cand)``: the joints its
     gain is scored on; ``named`` marks the rows of the effects the diagnosis named (searched on the
     model without them: how far above what the record shows they are). The candidates' searches run
-    side by side, each whole in one process (a search's next rung waits only for its own last)."""
+    side by side, each whole in one process (a search's next rung waits only for its own last).
+    ``whole``: (a longer window, each group's Jacobian over it) where a ladder that shows nothing
+    within its range on ``problem`` is searched again: a short window can hold one direction of a
+    joint's motion only (a closed-loop boom that rises for its first seconds shows no valve
+    asymmetry there, however large); each row's ``window`` says which one it was found on."""
     bases = _simulate_all(runner, [g[0].copy() for g in groups], problem.n, side)
     todo = []
     search = _Search(groups, bases, runner, problem, joints_of, threshold, noise, pressure_noise, restart, todo)
@@ -144,8 +150,17 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
                 values = one_way(fp, toward)
             if values:
                 todo.append((gi, c, values))
-    indices = list(range(len(todo)))
-    found = side.map(_bisect, indices, hold=search) if side is not None else [search.bisect(i) for i in indices]
+    found = _searched(search, side)
+    window = ["first"] * len(todo)
+    again = [i for i, (hi, _) in enumerate(found) if hi is None]
+    if whole is not None and again:
+        longer, jacobians = whole
+        wgroups = [(g[0], jacobians[gi]) + tuple(g[2:]) for gi, g in enumerate(groups)]
+        wbases = _simulate_all(runner, [g[0].copy() for g in groups], longer.n, side)
+        wsearch = _Search(wgroups, wbases, runner, longer, joints_of, threshold, noise, pressure_noise, restart,
+                          [todo[i] for i in again])
+        for i, f in zip(again, _searched(wsearch, side)):
+            found[i], window[i] = f, "whole"
     out = []
     for i, ((gi, c, values), (hi, gains)) in enumerate(zip(todo, found)):
         fp = c.free[0]
@@ -156,8 +171,18 @@ def shown(groups: list[tuple], runner, problem: Problem, joints_of, *, threshold
             "named": bool(groups[gi][3]), "range_end": _num(values[-1]),
             "shows_from": None if hi is None else _num(values[hi]),
             "tested": first + [{"value": _num(values[k]), "expected_gain": _num(g)} for k, g in sorted(gains.items())],
+            "window": WINDOWS[window[i]],
         })
     return out
+
+
+WINDOWS = {"first": "the first half of the estimation window", "whole": "the estimation window"}
+
+
+def _searched(search: "_Search", side) -> list[tuple[int | None, dict[int, float]]]:
+    """Every ladder of ``search`` bisected (side by side where ``side`` is given)."""
+    indices = list(range(len(search.todo)))
+    return side.map(_bisect, indices, hold=search) if side is not None else [search.bisect(i) for i in indices]
 
 
 @dataclass

@@ -136,7 +136,9 @@ class Diagnosis:
                                   "simulated, the calibrated parameters refitted to it to first order; shows_from: "
                                   "the smallest magnitude whose expected gain reaches the threshold (null: not within "
                                   "the range); each named effect (named: true) the same on the calibrated baseline. "
-                                  "An estimate on the first half of the estimation window with one noise draw"},
+                                  "An estimate on the first half of the estimation window with one noise draw; a "
+                                  "ladder that shows nothing there is searched again on the whole estimation window "
+                                  "(window: which one)"},
             "timings_s": self.timings,
         }
 
@@ -722,7 +724,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     with SideBySide(workers if backend is None else 1) as side:
         shows = detectability.shown(groups, fast, st.grid, lambda c: affected_joints(c, est.joints),
                                     threshold=THRESHOLD_POINTS, noise=noise, pressure_noise=pn_val,
-                                    restart=vprob.restart, side=side)
+                                    restart=vprob.restart, side=side,
+                                    whole=(est, [ext_jac] + ([cal_jac] if selected else [])))
     timings["detectable"] = time.perf_counter() - t_start
     timings["total"] = time.perf_counter() - t_start
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
