@@ -153,21 +153,29 @@ def test_a_valve_offset_is_named_above_what_the_record_shows_and_not_below(cli, 
         assert not any(r["named"] for r in got["detectable"]["effects"] if r["effect"] != "valve_offset")
 
 
+def named_alone(cli, tmp_path, robot, hidden):
+    """``in.csv`` simulated with the ``hidden`` (effect, joint, parameter, value) and diagnosed with the
+    deadband and the valve asymmetry: the CLI's answer, diagnosis.json, and the named effect's
+    ``detectable`` row, once the effect is asserted named alone within 5 %."""
+    effect, joint, name, value = hidden
+    cli("simulate", "--robot", robot, "--input", tmp_path / "in.csv", "--out", tmp_path / "m.csv",
+        "--effect", f"{effect}:joint={joint},{name}={value}", "--noise-angle", 3e-4, "--seed", 5, check=True)
+    proc = cli("diagnose", "--robot", robot, tmp_path / "m.csv", "--report", tmp_path / "rep",
+               "--effects", "deadband", "valve_asymmetry", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    assert [(s["effect"], s["joint"]) for s in d["selected"]] == [(effect, joint)]
+    assert d["selected"][0]["params"][name] == pytest.approx(value, rel=0.05)
+    return proc, d, next(r for r in d["detectable"]["effects"] if r["named"])
+
+
 def test_a_deadband_named_narrower_than_the_specs_is_searched_below_it(cli, tmp_path):
     """The harvester's valves carry a 1.2 V deadband in the spec; a swing valve with 0.5 V is named
     narrower, and what the record shows of it is searched from 1.2 V down to 0, not up to 4.5 V
     (which said "from about 1.6 V" beside a named 0.5 V)."""
     cli("excite", "--robot", "harvester", "--joint", "swing", "--duration", 20, "--rate", 100, "--seed", 3,
         "--out", tmp_path / "in.csv", check=True)
-    cli("simulate", "--robot", "harvester", "--input", tmp_path / "in.csv", "--out", tmp_path / "m.csv",
-        "--effect", "deadband:joint=swing,width=0.5", "--noise-angle", 3e-4, "--seed", 5, check=True)
-    proc = cli("diagnose", "--robot", "harvester", tmp_path / "m.csv", "--report", tmp_path / "rep",
-               "--effects", "deadband", "valve_asymmetry", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
-    assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("deadband", "swing")]
-    assert d["selected"][0]["params"]["width"] == pytest.approx(0.5, rel=0.05)
-    row = next(r for r in d["detectable"]["effects"] if r["named"])
+    proc, d, row = named_alone(cli, tmp_path, "harvester", ("deadband", "swing", "width", 0.5))
     assert row["null"] == pytest.approx(1.2) and row["range_end"] == pytest.approx(0.0)
     assert row["tested"] and all(t["value"] < 1.2 for t in row["tested"])
     if row["shows_from"] is not None:
@@ -187,15 +195,7 @@ def test_a_ladder_that_shows_nothing_on_the_short_window_is_searched_on_the_whol
     u[steps] = np.repeat(np.random.default_rng(4).choice([-3.0, 3.0], size=steps.sum() // 40 + 1), 40)[: steps.sum()]
     from sim_core.dataset import write_csv
     write_csv(tmp_path / "in.csv", {"time": t, "u_j2": u})
-    cli("simulate", "--robot", "hydrolek", "--input", tmp_path / "in.csv", "--out", tmp_path / "m.csv",
-        "--effect", "valve_asymmetry:joint=j2,ratio=0.6", "--noise-angle", 3e-4, "--seed", 5, check=True)
-    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "m.csv", "--report", tmp_path / "rep",
-               "--effects", "valve_asymmetry", "deadband", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
-    assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("valve_asymmetry", "j2")]
-    assert d["selected"][0]["params"]["ratio"] == pytest.approx(0.6, rel=0.05)
-    row = next(r for r in d["detectable"]["effects"] if r["named"])
+    proc, d, row = named_alone(cli, tmp_path, "hydrolek", ("valve_asymmetry", "j2", "ratio", 0.6))
     assert row["window"] == "the estimation window"
     assert row["shows_from"] is not None and 0.6 < row["shows_from"] < 1.0
     # a ladder that shows on the short window stays there
