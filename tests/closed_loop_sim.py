@@ -36,26 +36,34 @@ def closed_loop_columns(spec, joint: str, *, kp: float, duration: float = 30.0, 
     frozen while the command saturates; None: P only. ``settle_band`` (rad or m): once the error is
     within it, the controller parks the valve at 0 V, its integral frozen, until the error leaves twice
     it (a closed valve holds the joint without hunting)."""
+    r = step_reference(spec, joint, duration, rate, seed) if reference is None else reference
+    return loops_columns(spec, {joint: r}, kp=kp, rate=rate, seed=seed, ti=ti, settle_band=settle_band)
+
+
+def loops_columns(spec, references: dict[str, np.ndarray], *, kp: float, rate: float = 50.0, seed: int = 0,
+                  ti: float | None = None, settle_band: float = 0.0) -> dict[str, np.ndarray]:
+    """``closed_loop_columns`` with a loop of its own on each joint of ``references`` (joint: its
+    reference, all of one length), every loop with the same gains."""
     ctx = Plant(spec).create_context(seed=seed)
     sim = Simulator(ctx)
-    r = step_reference(spec, joint, duration, rate, seed) if reference is None else reference
-    n = r.size
+    n = next(iter(references.values())).size
     na = len(spec.joints)
-    a = spec.joint_names.index(joint)
-    lo, hi = spec.joint(joint).command_range
+    a = np.array([spec.joint_names.index(j) for j in references])
+    R = np.stack([references[j] for j in references], axis=1)
+    lo, hi = (np.array(v, dtype=float) for v in zip(*(spec.joint(j).command_range for j in references)))
     U = np.zeros((n, na))
     Y = np.zeros((n, na, L.YA_N))
     dt = 1.0 / rate
     row = sim.sample()
-    integral, parked = 0.0, False
+    integral, parked = np.zeros(a.size), np.zeros(a.size, dtype=bool)
     for k in range(n):
         Y[k] = row
-        e = r[k] - row[a, L.YA_ANGLE]
-        parked = abs(e) < (2.0 if parked else 1.0) * settle_band
-        raw = 0.0 if parked else kp * (e + (integral / ti if ti else 0.0))
-        U[k, a] = min(max(raw, lo), hi)
-        if ti and not parked and U[k, a] == raw:
-            integral += e * dt
+        e = R[k] - row[a, L.YA_ANGLE]
+        parked = np.abs(e) < np.where(parked, 2.0, 1.0) * settle_band
+        raw = np.where(parked, 0.0, kp * (e + (integral / ti if ti else 0.0)))
+        U[k, a] = np.minimum(np.maximum(raw, lo), hi)
+        if ti:
+            integral += np.where(~parked & (U[k, a] == raw), e * dt, 0.0)
         if k < n - 1:
             row = sim.step(U[k], dt).copy()
     return _columns(spec, np.arange(n) * dt, U, Y)

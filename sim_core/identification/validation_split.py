@@ -2,17 +2,24 @@
 
 By default the first ``ESTIMATION_SHARE`` of the record is fitted and the rest validates. A log often
 ends with the rig standing still (the test is over, the logger runs on) or starts so (it was started
-before the test): a part in which no diagnosed joint's reading leaves its noise carries nothing to
-judge a model by. Validated on such a part, a model that is exactly right fits the noise near 0 %,
-one a fraction of a degree off scores thousands of points below, and a clean record reads as
-unexplained. So where either part of the default split holds still on every diagnosed joint
-(``record.holds_still``, the rule a record's commanded joints are checked by), the split is put at
-``ESTIMATION_SHARE`` of the record's motion instead: from the first sample at which any joint has
-left the reading it starts at, to the last at which any is still away from the one it ends at (its
-mean over ``SMOOTH_SAMPLES`` samples by more than ``STILL_SPAN / 2`` noise sigmas: one sample
-beyond 5 sigmas of a level read off 5 samples is a noise draw that a record of ten joints holding
-for thousands of samples makes likely, and it would put the end of the motion there). The still
-parts stay in the record: a hold can show a leak's creep, and the other part still has the motion.
+before the test), and a record of several joints often moves one of them longer than the others (the
+operator works one joint on; a leak keeps one creeping under its controller): a part in which a
+diagnosed joint's reading never leaves its noise carries nothing to judge that joint's model by.
+Validated on such a part, a joint's model that is exactly right fits the noise near 0 %, one a
+fraction of a degree off scores thousands of points below, and a clean record reads as unexplained.
+So where either part of the default split holds still on a diagnosed joint that moves elsewhere in
+the record (``record.holds_still``, the rule a record's commanded joints are checked by), the split
+goes where every such joint moves on both sides of it: each joint's motion runs from the first sample
+at which it has left the reading it starts at to the last at which it is still away from the one it
+ends at (its mean over ``SMOOTH_SAMPLES`` samples by more than ``STILL_SPAN / 2`` noise sigmas: one
+sample beyond 5 sigmas of a level read off 5 samples is a noise draw that a record of ten joints
+holding for thousands of samples makes likely, and it would put the end of the motion there), and the
+split is the sample at which the joint worst served has the largest share of its motion on the side
+it is short of, a share of ``ESTIMATION_SHARE`` before and of the rest after counting as full. On a
+record of one joint (or of joints that move together) that is ``ESTIMATION_SHARE`` of the motion.
+Where no sample has every such joint moving on both sides (one moves only early, another only late),
+the default split stays: pass a validation record. The still parts stay in the record: a hold can
+show a leak's creep, and the other part still has the motion.
 """
 
 from __future__ import annotations
@@ -27,42 +34,61 @@ LEVEL_SAMPLES = 5     # samples whose median is the reading a joint starts or en
 SMOOTH_SAMPLES = 9    # samples averaged before a reading is compared with those (its noise / 3)
 
 
+def joint_motion(q: np.ndarray) -> tuple[int, int] | None:
+    """(first, last + 1) sample at which the reading ``q`` is away from its starting, or its ending,
+    reading (its mean over ``SMOOTH_SAMPLES``) by more than ``STILL_SPAN / 2`` noise sigmas; None
+    where it never is."""
+    band = 0.5 * STILL_SPAN * noise_std(q)
+    mean = uniform_filter1d(q, SMOOTH_SAMPLES, mode="nearest")
+    away_from_start = np.flatnonzero(np.abs(mean - np.median(q[:LEVEL_SAMPLES])) > band)
+    away_from_end = np.flatnonzero(np.abs(mean - np.median(q[-LEVEL_SAMPLES:])) > band)
+    first = int(away_from_start[0]) if away_from_start.size else q.size
+    last = int(away_from_end[-1]) + 1 if away_from_end.size else 0
+    return (first, last) if first < last else None
+
+
 def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
     """(first, last + 1) sample at which any of ``joints`` is away from its starting, or its ending,
-    reading (its mean over ``SMOOTH_SAMPLES``) by more than ``STILL_SPAN / 2`` noise sigmas; (0, n)
-    where none moves."""
-    first, last = rec.n, 0
-    for j in joints:
-        q = rec.angles[j]
-        band = 0.5 * STILL_SPAN * noise_std(q)
-        mean = uniform_filter1d(q, SMOOTH_SAMPLES, mode="nearest")
-        away_from_start = np.flatnonzero(np.abs(mean - np.median(q[:LEVEL_SAMPLES])) > band)
-        away_from_end = np.flatnonzero(np.abs(mean - np.median(q[-LEVEL_SAMPLES:])) > band)
-        if away_from_start.size:
-            first = min(first, int(away_from_start[0]))
-        if away_from_end.size:
-            last = max(last, int(away_from_end[-1]) + 1)
-    return (first, last) if first < last else (0, rec.n)
+    reading (``joint_motion``); (0, n) where none moves."""
+    spans = [s for s in (joint_motion(rec.angles[j]) for j in joints) if s]
+    return (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else (0, rec.n)
+
+
+def served(spans: list[tuple[int, int]], n: int) -> np.ndarray:
+    """For each sample s of a record of ``n``: the least, over the joints' motion ``spans``, of the share
+    of a joint's motion before s over ``ESTIMATION_SHARE`` and of its motion after s over the rest
+    (1 where a joint's motion is split in those shares, 0 or less where all of it is on one side)."""
+    s = np.arange(n, dtype=float)[:, None]
+    first, last = (np.array(v, dtype=float)[None, :] for v in zip(*spans))
+    length = last - first
+    return np.min(np.minimum((s - first) / (ESTIMATION_SHARE * length),
+                             (last - s) / ((1.0 - ESTIMATION_SHARE) * length)), axis=1)
 
 
 def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
     """First validation sample of ``rec`` (``joints``: the diagnosed ones) and why it is not the
-    default one ("" where it is); where the default split leaves a part that holds still, the sample at
-    ``ESTIMATION_SHARE`` of the motion."""
+    default one ("" where it is); where a part of the default split holds still on a joint that moves,
+    the sample at which every moving joint is best served on both sides (``served``)."""
     n = int(round(rec.n * ESTIMATION_SHARE))
-    joints = [j for j in joints if j in rec.angles]
+    spans = {j: s for j in joints
+             if j in rec.angles and not holds_still(rec.angles[j]) and (s := joint_motion(rec.angles[j]))}
     parts = {"estimation": slice(0, n), "validation": slice(n, rec.n)}
-    still = [name for name, part in parts.items()
-             if joints and all(holds_still(rec.angles[j][part]) for j in joints)]
+    still = {name: [j for j in spans if holds_still(rec.angles[j][part])] for name, part in parts.items()}
+    still = {name: js for name, js in still.items() if js}
     if not still:
         return n, ""
-    first, last = motion_span(rec, joints)
-    moved = first + int(round((last - first) * ESTIMATION_SHARE))
-    if moved == n or not 0 < moved < rec.n:
+    share = served(list(spans.values()), rec.n)
+    moved = int(np.argmax(share))
+    if share[moved] <= max(share[n], 0.0) or not 0 < moved < rec.n:
         return n, ""
     t = rec.time
-    return moved, (f"the {' and the '.join(still)} part{'s' if len(still) > 1 else ''} of the default split "
-                 f"(validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} of the record) "
-                 f"hold{'' if len(still) > 1 else 's'} still on every diagnosed joint: the joints move from "
-                 f"{t[first]:.1f} s to {t[last - 1]:.1f} s, so validation starts at {t[moved]:.1f} s, "
-                 f"{ESTIMATION_SHARE:.0%} into the motion (or pass --validation OTHER.csv)")
+    first, last = motion_span(rec, list(spans))
+    on = {name: ("every diagnosed joint" if len(js) == len(spans) == len([j for j in joints if j in rec.angles])
+                 else ", ".join(js)) for name, js in still.items()}
+    what = " and ".join(f"the {name} part holds still on {who}" for name, who in on.items())
+    where = (f"{ESTIMATION_SHARE:.0%} into the motion" if len(spans) == 1 else
+             f"where each joint that moves has at least {min(share[moved], 1.0) * ESTIMATION_SHARE:.0%} of its motion "
+             f"before and {min(share[moved], 1.0) * (1 - ESTIMATION_SHARE):.0%} after")
+    return moved, (f"{what} in the default split (validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} "
+                   f"of the record): the joints move from {t[first]:.1f} s to {t[last - 1]:.1f} s, so validation "
+                   f"starts at {t[moved]:.1f} s, {where} (or pass --validation OTHER.csv)")
