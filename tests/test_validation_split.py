@@ -43,7 +43,7 @@ def test_a_record_still_after_its_first_third_is_split_within_its_motion():
     first, last = motion_span(rec, ["j"])
     # the sweep's ends, within the noise band (and half the smoothing window)
     assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
-    assert abs(n - (first + (last - first) * ESTIMATION_SHARE)) <= 1
+    assert n == first + round((last - first) * ESTIMATION_SHARE)
     assert holds_still(rec.angles["j"][1800:]) and not holds_still(rec.angles["j"][n:])
     assert "validation part" in why and "holds still" in why
 
@@ -90,7 +90,7 @@ def test_a_joint_still_in_a_part_moves_the_split_though_another_moves_there():
     (fj, lj), (fk, lk) = joint_motion(rec.angles["j"]), joint_motion(rec.angles["k"])
     # where j's share after the split over 40 % equals k's share before it over 60 %
     balance = (lj / (0.4 * (lj - fj)) + fk / (0.6 * (lk - fk))) / (1 / (0.4 * (lj - fj)) + 1 / (0.6 * (lk - fk)))
-    assert abs(n - balance) <= 1 and 600 < n < 1000
+    assert n == round(balance) and 600 < n < 1000
     assert not any(holds_still(rec.angles[x][part]) for x in "jk" for part in (slice(0, n), slice(n, None)))
     assert "validation part holds still on j in the default split" in why and "every diagnosed joint" not in why
 
@@ -101,7 +101,7 @@ def test_only_the_diagnosed_joints_count():
     rec = _two(_moves(3000, 0, 1000), _moves(3000, 0, 3000))
     assert validation_start(rec, ["k"]) == (1800, "")
     first, last = joint_motion(rec.angles["j"])
-    assert abs(validation_start(rec, ["j"])[0] - (first + 0.6 * (last - first))) <= 1
+    assert validation_start(rec, ["j"])[0] == first + round(0.6 * (last - first))
 
 
 def test_joints_that_move_apart_keep_the_default_split():

@@ -54,15 +54,26 @@ def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
     return (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else (0, rec.n)
 
 
-def served(spans: list[tuple[int, int]], n: int) -> np.ndarray:
-    """For each sample s of a record of ``n``: the least, over the joints' motion ``spans``, of the share
-    of a joint's motion before s over ``ESTIMATION_SHARE`` and of its motion after s over the rest
-    (1 where a joint's motion is split in those shares, 0 or less where all of it is on one side)."""
-    s = np.arange(n, dtype=float)[:, None]
-    first, last = (np.array(v, dtype=float)[None, :] for v in zip(*spans))
+def served(spans: list[tuple[int, int]], s: np.ndarray) -> np.ndarray:
+    """At each split ``s`` (samples): the least, over the joints' motion ``spans``, of the share of a
+    joint's motion before s over ``ESTIMATION_SHARE`` and of its motion after s over the rest (1 where
+    a joint's motion is split in those shares, 0 or less where all of it is on one side)."""
+    first, last = (np.array(v, dtype=float) for v in zip(*spans))
     length = last - first
+    s = np.asarray(s, dtype=float)[..., None]
     return np.min(np.minimum((s - first) / (ESTIMATION_SHARE * length),
-                             (last - s) / ((1.0 - ESTIMATION_SHARE) * length)), axis=1)
+                             (last - s) / ((1.0 - ESTIMATION_SHARE) * length)), axis=-1)
+
+
+def best_served(spans: list[tuple[int, int]]) -> float:
+    """The split (a sample, not rounded) at which ``served`` is largest. The least of rising shares
+    meets the least of falling ones where one joint's share before crosses one's share after: the
+    best of those crossings (on one joint, ``ESTIMATION_SHARE`` of its motion)."""
+    first, last = (np.array(v, dtype=float) for v in zip(*spans))
+    rise, fall = ESTIMATION_SHARE * (last - first), (1.0 - ESTIMATION_SHARE) * (last - first)
+    # (s - first_i) / rise_i = (last_k - s) / fall_k, for every i, k
+    cross = ((first[:, None] * fall[None, :] + last[None, :] * rise[:, None]) / (rise[:, None] + fall[None, :])).ravel()
+    return float(cross[np.argmax(served(spans, cross))])
 
 
 def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
@@ -77,9 +88,9 @@ def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
     still = {name: js for name, js in still.items() if js}
     if not still:
         return n, ""
-    share = served(list(spans.values()), rec.n)
-    moved = int(np.argmax(share))
-    if share[moved] <= max(share[n], 0.0) or not 0 < moved < rec.n:
+    moved = int(round(best_served(list(spans.values()))))
+    share, default = served(list(spans.values()), [moved, n])
+    if share <= max(default, 0.0) or not 0 < moved < rec.n:
         return n, ""
     t = rec.time
     first, last = motion_span(rec, list(spans))
@@ -87,8 +98,8 @@ def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
                  else ", ".join(js)) for name, js in still.items()}
     what = " and ".join(f"the {name} part holds still on {who}" for name, who in on.items())
     where = (f"{ESTIMATION_SHARE:.0%} into the motion" if len(spans) == 1 else
-             f"where each joint that moves has at least {min(share[moved], 1.0) * ESTIMATION_SHARE:.0%} of its motion "
-             f"before and {min(share[moved], 1.0) * (1 - ESTIMATION_SHARE):.0%} after")
+             f"where each joint that moves has at least {min(share, 1.0) * ESTIMATION_SHARE:.0%} of its motion "
+             f"before and {min(share, 1.0) * (1 - ESTIMATION_SHARE):.0%} after")
     return moved, (f"{what} in the default split (validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} "
                    f"of the record): the joints move from {t[first]:.1f} s to {t[last - 1]:.1f} s, so validation "
                    f"starts at {t[moved]:.1f} s, {where} (or pass --validation OTHER.csv)")
