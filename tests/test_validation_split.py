@@ -34,12 +34,12 @@ def _moves(n: int, lo: int, hi: int) -> np.ndarray:
 
 def test_a_record_that_moves_throughout_keeps_the_default_split():
     rec = _record(_moves(3000, 0, 3000))
-    assert validation_start(rec, ["j"]) == (round(3000 * ESTIMATION_SHARE), "")
+    assert validation_start(rec, ["j"]) == (round(3000 * ESTIMATION_SHARE), "", "")
 
 
 def test_a_record_still_after_its_first_third_is_split_within_its_motion():
     rec = _record(_moves(3000, 0, 1000))
-    n, why = validation_start(rec, ["j"])
+    n, why, _ = validation_start(rec, ["j"])
     first, last = motion_span(rec, ["j"])
     # the sweep's ends, within the noise band (and half the smoothing window)
     assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
@@ -62,7 +62,7 @@ def test_a_noise_draw_in_a_long_hold_is_not_motion():
 
 def test_a_record_still_until_late_is_split_within_its_motion_too():
     rec = _record(_moves(3000, 2000, 3000))
-    n, why = validation_start(rec, ["j"])
+    n, why, _ = validation_start(rec, ["j"])
     assert 2000 < n < 3000 and "estimation part" in why
     assert not holds_still(rec.angles["j"][:n])
 
@@ -71,7 +71,7 @@ def test_a_slow_creep_in_the_validation_part_is_motion():
     """A hold that creeps (a leak) by more than the still span is not still: the default split stays."""
     q = _moves(3000, 0, 1000)
     q[1000:] = np.linspace(0.0, 40 * SIGMA, 2000)
-    assert validation_start(_record(q), ["j"]) == (1800, "")
+    assert validation_start(_record(q), ["j"]) == (1800, "", "")
 
 
 def _two(j: np.ndarray, k: np.ndarray) -> Record:
@@ -86,7 +86,7 @@ def test_a_joint_still_in_a_part_moves_the_split_though_another_moves_there():
     where the joint worst served has the most of its motion on its short side: j's 60 % point (600)
     would leave k a third of its own 60 % before it, k's (1800) leaves j nothing after it."""
     rec = _two(_moves(3000, 0, 1000), _moves(3000, 0, 3000))
-    n, why = validation_start(rec, ["j", "k"])
+    n, why, _ = validation_start(rec, ["j", "k"])
     (fj, lj), (fk, lk) = joint_motion(rec.angles["j"]), joint_motion(rec.angles["k"])
     # where j's share after the split over 40 % equals k's share before it over 60 %
     balance = (lj / (0.4 * (lj - fj)) + fk / (0.6 * (lk - fk))) / (1 / (0.4 * (lj - fj)) + 1 / (0.6 * (lk - fk)))
@@ -99,16 +99,21 @@ def test_only_the_diagnosed_joints_count():
     """j holds in the default validation part and k does not: diagnosed alone, k keeps the default
     split and j's split is its own 60 % point."""
     rec = _two(_moves(3000, 0, 1000), _moves(3000, 0, 3000))
-    assert validation_start(rec, ["k"]) == (1800, "")
+    assert validation_start(rec, ["k"]) == (1800, "", "")
     first, last = joint_motion(rec.angles["j"])
     assert validation_start(rec, ["j"])[0] == first + round(0.6 * (last - first))
 
 
-def test_joints_that_move_apart_keep_the_default_split():
-    """j moves only in the first third, k only in the last: no split has both moving on both sides,
-    and the default one stays (a validation record is what helps)."""
-    rec = _two(_moves(3000, 0, 1000), _moves(3000, 2000, 3000))
-    assert validation_start(rec, ["j", "k"]) == (1800, "")
+@pytest.mark.parametrize("j_moves, k_moves", [((0, 1000), (2000, 3000)), ((0, 100), (0, 3000))])
+def test_a_split_that_would_serve_one_joint_at_the_others_cost_is_not_made(j_moves, k_moves):
+    """j moves only in the first third and k only in the last (no split has both moving on both sides),
+    or j is homed in the first 2 s of 60 while k moves throughout (the split that serves j best, at
+    1.9 s, leaves k a tenth of its share to be fitted on): the default split stays, and the note
+    says which joint is judged on a part in which it holds still."""
+    rec = _two(_moves(3000, *j_moves), _moves(3000, *k_moves))
+    n, why, kept = validation_start(rec, ["j", "k"])
+    assert (n, why) == (1800, "")
+    assert "validation part holds still on j" in kept and "--validation" in kept
 
 
 def test_a_joint_that_holds_still_throughout_does_not_move_the_split():
@@ -119,7 +124,7 @@ def test_a_joint_that_holds_still_throughout_does_not_move_the_split():
     j[500:1000] = 6 * SIGMA
     rec = _two(j, _moves(3000, 0, 3000))
     assert holds_still(rec.angles["j"]) and joint_motion(rec.angles["j"]) is not None
-    assert validation_start(rec, ["j", "k"]) == (1800, "")
+    assert validation_start(rec, ["j", "k"]) == (1800, "", "")
 
 
 def _stepped_then_still(cli, tmp_path, deadband: float | None):
@@ -181,3 +186,20 @@ def test_a_record_of_four_joints_one_worked_on_after_the_others_hold_is_diagnose
     assert d["verdict"] == "discrepancy", d["unexplained"]
     assert [(s["effect"], s["joint"]) for s in d["selected"]] == [("valve_asymmetry", "j4")]
     assert d["selected"][0]["params"]["ratio"] == pytest.approx(0.6, rel=0.05)
+
+
+def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp_path):
+    """j1 moved to its position in the first 2 s and held there, j2 stepped throughout: serving j1
+    would leave j2 under 3 s to be fitted on, so the default split stays, and the report and the
+    terminal say that j1 is judged on a part in which it holds still."""
+    spec = load_robot("hydrolek")
+    j2 = step_reference(spec, "j2", 30.0, RATE, seed=3)
+    j1 = np.full(j2.size, float(spec.joint("j1").settings["initial_position"]) + 0.2)
+    write_csv(tmp_path / "homed.csv", loops_columns(spec, {"j1": j1, "j2": j2}, kp=15.0))
+    proc = cli("diagnose", "--robot", "hydrolek", tmp_path / "homed.csv", "--report", tmp_path / "rep",
+               "--effects", "deadband", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    v = d["validation"]
+    assert v["start_s"] == pytest.approx(18.0, abs=0.05) and v["moved"] is None
+    assert "validation part holds still on j1" in v["kept"] and f"validated on: {v['kept']}" in proc.stdout

@@ -81,8 +81,8 @@ def run(args):
             backend.close()
     paths = report.write(d, args.report, spec, fmt=args.format, workers=args.workers)
     print(f"{d.verdict}: {args.data} on {spec.name} ({d.timings.get('total', 0):.1f} s)")
-    if d.split_moved:
-        print(f"  validated on: {d.split_moved}")
+    if d.split_moved or d.split_kept:
+        print(f"  validated on: {d.split_moved or d.split_kept}")
     for s in d.selected:
         params = ", ".join(f"{k}={v:.4g}" for k, v in s["params"].items())
         flag = f"; ambiguous with {s['runner_up']['effect']} ({s['decided_by']})" if s.get("ambiguous") else ""

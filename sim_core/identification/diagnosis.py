@@ -82,6 +82,7 @@ class Diagnosis:
     restart_s: float | None = None   # the validation angle restarts from the record this often (closed loop)
     detectable: list[dict] = field(default_factory=list)   # detectability.shown: what the record could show
     split_moved: str = ""   # why the validation part is not the record's last 40 % ("" where it is)
+    split_kept: str = ""    # why it is although a part of it holds still on a joint that moves
 
     @property
     def verdict(self) -> str:
@@ -117,7 +118,8 @@ class Diagnosis:
             },
             "validation": {"source": self.validation.source, "first_sample": self.split,
                            "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split),
-                           "angle_restart_s": self.restart_s, "moved": self.split_moved or None},
+                           "angle_restart_s": self.restart_s, "moved": self.split_moved or None,
+                           "kept": self.split_kept or None},
             "calibration": self.calibration,
             "closed_loop": bool(self.closed_loop.get("closed_loop", False)),
             "closed_loop_evidence": self.closed_loop,
@@ -179,18 +181,19 @@ def _numerics_again(model, fast: Runner, vfast: Runner, vprob: oe.Problem, rec: 
 
 
 def _split(rec: Record, val: Record | None, targets: list[str],
-           notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int, str]:
-    """Estimation and validation problems: the first 60 % and the last 40 % of a single record (of its
-    motion where a part of that holds still: validation_split.py, whose reason is the last item, "" for
-    the default split), or the whole record and the whole validation record."""
+           notes: list[str]) -> tuple[oe.Problem, oe.Problem, Record, int, str, str]:
+    """Estimation and validation problems: the first 60 % and the last 40 % of a single record (split
+    within the joints' motion where a part of that holds still on one: validation_split.py, whose
+    reasons are the last two items, why the split moved and why it stayed though a part holds still,
+    "" where there is none), or the whole record and the whole validation record."""
     if val is None:
-        n, moved = validation_start(rec, targets)
-        if moved:
-            notes.append(moved)
+        n, moved, kept = validation_start(rec, targets)
+        if moved or kept:
+            notes.append(moved or kept)
         n_est = min(n, MAX_ESTIMATION_SAMPLES)
         if n_est < n:
             notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of the {n} before the validation part")
-        return (oe.Problem(rec, targets, n=n_est), oe.Problem(rec, targets, start=n), rec, n, moved)
+        return (oe.Problem(rec, targets, n=n_est), oe.Problem(rec, targets, start=n), rec, n, moved, kept)
     missing = [f"q_{j}" for j in targets if j not in val.angles]
     if missing:
         raise ValueError(f"--validation {val.source}: no column {', '.join(missing)} (the estimation record's measured, "
@@ -199,7 +202,7 @@ def _split(rec: Record, val: Record | None, targets: list[str],
     if n_est < rec.n:
         notes.append(f"estimation uses the first {n_est} samples ({rec.time[n_est]:.0f} s) of {rec.source}")
     return (oe.Problem(rec, targets, n=n_est),
-            oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0, "")
+            oe.Problem(val, targets, pressures=rec.has_pressures and val.has_pressures), val, 0, "", "")
 
 
 def _fits_all(prob: oe.Problem, out: Outputs, rec: Record, start: int) -> dict:
@@ -247,7 +250,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if share > 0.05:
             notes.append(f"{j}: {100 * share:.0f} % of the samples are within {END_STOP_MARGIN:g} "
                          f"{column_unit(f'q_{j}', spec)} of a joint limit (end-stop contact)")
-    est, vprob, vrec, split, split_moved = _split(rec, val, targets, notes)
+    est, vprob, vrec, split, split_moved, split_kept = _split(rec, val, targets, notes)
     m0 = model_spec(spec)
 
     # numerics for the many candidate fits, checked on this record
@@ -293,7 +296,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             notes.append(command_hold.note(hold))
         if hold["replay"] == command_hold.PERIOD_MEAN:
             rec, val = moving, (None if val is None else command_hold.replayed(val, hold_joints))
-            est, vprob, vrec, split, split_moved = _split(rec, val, targets, [])
+            est, vprob, vrec, split, split_moved, split_kept = _split(rec, val, targets, [])
             fast, vfast = m_fast, Runner(vrec, fast.substep)
             accurate, vaccurate = Runner(rec), Runner(vrec)
             cal = m_cal
@@ -731,7 +734,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
     return Diagnosis(spec.name, rec, vrec, split, check, numerics, base_acc, ext_acc, base_out, ext_out, base_fits,
                      ext_fits, calib, selected, candidates, sel.rounds, sigs, tests, sel.stopped, sel.ceiling, notes,
                      {k: round(v, 2) for k, v in timings.items()}, loop, unexplained, pairs, ceilings,
-                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None, shows, split_moved)
+                     round(vprob.restart * vrec.dt, 3) if vprob.restart else None, shows, split_moved, split_kept)
 
 
 def _score(fits: dict, joints: list[str]) -> float:

@@ -17,8 +17,10 @@ holding for thousands of samples makes likely, and it would put the end of the m
 split is the sample at which the joint worst served has the largest share of its motion on the side
 it is short of, a share of ``ESTIMATION_SHARE`` before and of the rest after counting as full. On a
 record of one joint (or of joints that move together) that is ``ESTIMATION_SHARE`` of the motion.
-Where no sample has every such joint moving on both sides (one moves only early, another only late),
-the default split stays: pass a validation record. The still parts stay in the record: a hold can
+Where even that split leaves a joint under ``LEAST_SERVED`` of its share (one moves only early,
+another only late; a joint homed in the first seconds of a record whose others move throughout,
+where serving it would leave them seconds to be fitted on), the default split stays, and a note says
+which joint is judged on a part in which it holds still: pass a validation record. The still parts stay in the record: a hold can
 show a leak's creep, and the other part still has the motion.
 """
 
@@ -32,6 +34,7 @@ from .record import ESTIMATION_SHARE, STILL_SPAN, Record, holds_still
 
 LEVEL_SAMPLES = 5     # samples whose median is the reading a joint starts or ends at
 SMOOTH_SAMPLES = 9    # samples averaged before a reading is compared with those (its noise / 3)
+LEAST_SERVED = 1 / 3  # of its share on each side, the least a moved split may leave a joint that moves
 
 
 def joint_motion(q: np.ndarray) -> tuple[int, int] | None:
@@ -76,10 +79,12 @@ def best_served(spans: list[tuple[int, int]]) -> float:
     return float(cross[np.argmax(served(spans, cross))])
 
 
-def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
-    """First validation sample of ``rec`` (``joints``: the diagnosed ones) and why it is not the
-    default one ("" where it is); where a part of the default split holds still on a joint that moves,
-    the sample at which every moving joint is best served on both sides (``served``)."""
+def validation_start(rec: Record, joints: list[str]) -> tuple[int, str, str]:
+    """(first validation sample of ``rec``, why it is not the default one, why it is although a part
+    of the default split holds still on a joint that moves); ``joints``: the diagnosed ones, "" where
+    there is nothing to say. Where a part holds still on a joint that moves, the split is the sample
+    at which every moving joint is best served on both sides (``served``), if that serves each at
+    least ``LEAST_SERVED``."""
     n = int(round(rec.n * ESTIMATION_SHARE))
     spans = {j: s for j in joints
              if j in rec.angles and not holds_still(rec.angles[j]) and (s := joint_motion(rec.angles[j]))}
@@ -87,19 +92,27 @@ def validation_start(rec: Record, joints: list[str]) -> tuple[int, str]:
     still = {name: [j for j in spans if holds_still(rec.angles[j][part])] for name, part in parts.items()}
     still = {name: js for name, js in still.items() if js}
     if not still:
-        return n, ""
-    moved = int(round(best_served(list(spans.values()))))
-    share, default = served(list(spans.values()), [moved, n])
-    if share <= max(default, 0.0) or not 0 < moved < rec.n:
-        return n, ""
+        return n, "", ""
+    best = best_served(list(spans.values()))
+    moved = min(max(int(round(best)), 0), rec.n - 1)
+    share, default = served(list(spans.values()), [best, n])
     t = rec.time
-    first, last = motion_span(rec, list(spans))
     on = {name: ("every diagnosed joint" if len(js) == len(spans) == len([j for j in joints if j in rec.angles])
                  else ", ".join(js)) for name, js in still.items()}
     what = " and ".join(f"the {name} part holds still on {who}" for name, who in on.items())
+    default_split = f"the default split (validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} of the record)"
+    if share < LEAST_SERVED:
+        least = f"{LEAST_SERVED * ESTIMATION_SHARE:.0%} and {LEAST_SERVED * (1 - ESTIMATION_SHARE):.0%}"
+        return n, "", (f"{what} in {default_split}, and no split serves every joint that moves on both sides: the "
+                       f"best, at {t[moved]:.1f} s, leaves one {max(share, 0.0) * ESTIMATION_SHARE:.0%} of its motion "
+                       f"before it or {max(share, 0.0) * (1 - ESTIMATION_SHARE):.0%} after (a moved split leaves each at "
+                       f"least {least}). The default split stays, and a joint that holds still in a part is judged "
+                       f"there on its noise: pass --validation OTHER.csv, a record in which every joint moves")
+    if share <= default or not 0 < moved < rec.n:
+        return n, "", ""
+    first, last = motion_span(rec, list(spans))
     where = (f"{ESTIMATION_SHARE:.0%} into the motion" if len(spans) == 1 else
              f"where each joint that moves has at least {min(share, 1.0) * ESTIMATION_SHARE:.0%} of its motion "
              f"before and {min(share, 1.0) * (1 - ESTIMATION_SHARE):.0%} after")
-    return moved, (f"{what} in the default split (validation from {t[n]:.1f} s, the last {1 - ESTIMATION_SHARE:.0%} "
-                   f"of the record): the joints move from {t[first]:.1f} s to {t[last - 1]:.1f} s, so validation "
-                   f"starts at {t[moved]:.1f} s, {where} (or pass --validation OTHER.csv)")
+    return moved, (f"{what} in {default_split}: the joints move from {t[first]:.1f} s to {t[last - 1]:.1f} s, so "
+                   f"validation starts at {t[moved]:.1f} s, {where} (or pass --validation OTHER.csv)"), ""
