@@ -20,8 +20,8 @@ record of one joint (or of joints that move together) that is ``ESTIMATION_SHARE
 Where even that split leaves a joint under ``LEAST_SERVED`` of its share (one moves only early,
 another only late; a joint homed in the first seconds of a record whose others move throughout,
 where serving it would leave them seconds to be fitted on), the default split stays, and a note says
-which joint is judged on a part in which it holds still: pass a validation record. The still parts stay in the record: a hold can
-show a leak's creep, and the other part still has the motion.
+which joint is judged on a part in which it holds still: pass a validation record. The still parts
+stay in the record: a hold can show a leak's creep, and the other part still has the motion.
 """
 
 from __future__ import annotations
