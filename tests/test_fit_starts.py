@@ -3,7 +3,7 @@ and some effects' slopes vanish there: a leak coefficient's on its log scale, a 
 width. A least-squares fit started at the null can stay there. Beside accepted effects (fitted
 without the candidate, they absorb what they can of it) the null ranks above the grid's starts even
 where the effect is in the record, so there the best grid point is fitted from too. Real fits on a
-HydroLek shoulder record with a hidden leak and a grid whose only start is 25 to 150 times too large."""
+HydroLek shoulder record with a hidden leak and a grid whose only start is 25 times too large."""
 
 import dataclasses
 
@@ -26,10 +26,10 @@ from sim_core.simulator import Simulator
 JOINT = "j2"
 FLOW_KEY = f"joints.{JOINT}.valve.rated_flow"
 LEAK = 2e-12              # m^3/(s Pa), the hidden cross-port leak
-OVERSHOOT = 3e-10         # m^3/(s Pa), the grid's only start (the search range's top)
-# m^3/(s Pa): a start 25 times too large, inside the range. From OVERSHOOT itself the profiled flow gain
-# starts on its own lower bound too, and the fit out of that corner ended within its budget on one CPU and
-# needed more than the 80 of its budget on another (AMD EPYC); from here 47 on that one
+# m^3/(s Pa): the grid's only start, 25 times too large, inside the range. From the range's top (3e-10)
+# the profiled flow gain starts on its own lower bound too, and the fit out of that corner ended within
+# its budget on one CPU and needed more than the 80 of its budget on another (AMD EPYC), beside an
+# accepted effect too; from here 47 on that one
 START = 5e-11
 NULL = 1e-30              # m^3/(s Pa): 1e-23 m^3/s at 10 MPa, far below a chamber pressure's rounding
 
@@ -44,7 +44,7 @@ def record():
                                source="rec")
 
 
-def _leak_candidate(model, null: float | None = None, start: float = OVERSHOOT):
+def _leak_candidate(model, null: float | None = None, start: float = START):
     """The bank's leak candidate, its grid's only start at ``start``. ``null``: its null and its
     range's bottom moved there (NULL: a leak that changes no state by as much as its rounding, so the
     slope vanishes on every machine; at the bank's own 1e-15 it is faint, not nil, and whether a
@@ -60,7 +60,7 @@ def _leak_candidate(model, null: float | None = None, start: float = OVERSHOOT):
 
 def test_where_the_null_ranks_first_the_grid_is_fitted_from_too(record):
     model = model_spec(load_robot("hydrolek"))
-    cand = _leak_candidate(model, null=NULL, start=START)
+    cand = _leak_candidate(model, null=NULL)
     s0 = model_with(model, [], cand, {})
     free = free_list(s0, cand, [], [FLOW_KEY])
     grid = [p + [fp.get(s0) for fp in free[len(cand.free):]] for p in cand.grid]
@@ -103,6 +103,6 @@ def test_beside_accepted_effects_a_candidate_starts_from_its_grid(record):
     base_out, base_cost = base.outputs(before), base.cost(before)
     runner.leaks.clear()
     ev = evaluate(st, _leak_candidate(model), before, [(accepted, {})], base_out, base_cost, round_=2)
-    assert sum(v == pytest.approx(OVERSHOOT, rel=1e-6) for v in runner.leaks) >= 2
+    assert sum(v == pytest.approx(START, rel=1e-6) for v in runner.leaks) >= 2
     assert ev.values[f"effects.leakage.{JOINT}.internal"] == pytest.approx(LEAK, rel=0.05)
     assert ev.gain > 2.0
