@@ -9,7 +9,7 @@ import pytest
 
 from sim_core.dataset import write_csv
 from sim_core.identification.record import ESTIMATION_SHARE, Record, holds_still
-from sim_core.identification.validation_split import SMOOTH_SAMPLES, joint_motion, motion_span, validation_start
+from sim_core.identification.validation_split import SMOOTH_SAMPLES, joint_motion, validation_start
 from sim_core.model.spec import load_robot
 
 from closed_loop_sim import closed_loop_columns, loops_columns, step_reference
@@ -40,7 +40,7 @@ def test_a_record_that_moves_throughout_keeps_the_default_split():
 def test_a_record_still_after_its_first_third_is_split_within_its_motion():
     rec = _record(_moves(3000, 0, 1000))
     n, why, _ = validation_start(rec, ["j"])
-    first, last = motion_span(rec, ["j"])
+    first, last = joint_motion(rec.angles["j"])
     # the sweep's ends, within the noise band (and half the smoothing window)
     assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
     assert n == first + round((last - first) * ESTIMATION_SHARE)
@@ -54,9 +54,8 @@ def test_a_noise_draw_in_a_long_hold_is_not_motion():
     the hold's largest noise draw."""
     n = 6000
     angles = {f"j{k}": _record(_moves(n, 0, 1000), seed=k).angles["j"] for k in range(10)}
-    rec = Record("synthetic", np.arange(n) / RATE, np.zeros((n, 10)), angles, {}, list(angles), list(angles),
-                 {j: 0.0 for j in angles})
-    first, last = motion_span(rec, list(angles))
+    spans = [joint_motion(q) for q in angles.values()]
+    first, last = min(f for f, _ in spans), max(e for _, e in spans)
     assert first < 20 and 950 <= last <= 1000 + SMOOTH_SAMPLES // 2
 
 

@@ -50,13 +50,6 @@ def joint_motion(q: np.ndarray) -> tuple[int, int] | None:
     return (first, last) if first < last else None
 
 
-def motion_span(rec: Record, joints: list[str]) -> tuple[int, int]:
-    """(first, last + 1) sample at which any of ``joints`` is away from its starting, or its ending,
-    reading (``joint_motion``); (0, n) where none moves."""
-    spans = [s for s in (joint_motion(rec.angles[j]) for j in joints) if s]
-    return (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else (0, rec.n)
-
-
 def served(spans: list[tuple[int, int]], s: np.ndarray) -> np.ndarray:
     """At each split ``s`` (samples): the least, over the joints' motion ``spans``, of the share of a
     joint's motion before s over ``ESTIMATION_SHARE`` and of its motion after s over the rest (1 where
@@ -110,7 +103,7 @@ def validation_start(rec: Record, joints: list[str]) -> tuple[int, str, str]:
                        f"there on its noise: pass --validation OTHER.csv, a record in which every joint moves")
     if share <= default or not 0 < moved < rec.n:
         return n, "", ""
-    first, last = motion_span(rec, list(spans))
+    first, last = min(f for f, _ in spans.values()), max(e for _, e in spans.values())
     where = (f"{ESTIMATION_SHARE:.0%} into the motion" if len(spans) == 1 else
              f"where each joint that moves has at least {min(share, 1.0) * ESTIMATION_SHARE:.0%} of its motion "
              f"before and {min(share, 1.0) * (1 - ESTIMATION_SHARE):.0%} after")
