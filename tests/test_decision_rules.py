@@ -962,6 +962,39 @@ def test_unexplained_when_the_model_misses_by_far_and_the_residual_is_not_noise(
     assert r and "close 100 %" in r[0]
 
 
+def test_far_needs_the_points_and_a_misfit_of_more_than_far_noise_noises():
+    """Points are shares of the signal's spread. A joint a loop holds in the validation part barely
+    moves there (a noise ceiling of 63 %: its spread under three noises), and ten points below that
+    ceiling are less than one noise of misfit; on a channel far above its noise the points decide."""
+    assert dc.misfit_in_noise(63.0, 63.0) == 0.0 and dc.misfit_in_noise(70.0, 63.0) == 0.0
+    # residual norm over noise norm (100 - fit) / (100 - ceiling) = 2: misfit sqrt(3) noises
+    assert dc.misfit_in_noise(100.0 - 2.0 * 37.0, 63.0) == pytest.approx(math.sqrt(3.0))
+    assert dc.misfit_in_noise(90.0, 100.0) == math.inf
+    low = 63.0 - dc.FAR_POINTS - 0.1                        # 0.8 noises: not far
+    assert dc.misfit_in_noise(low, 63.0) < 1.0 and not dc.far(low, 63.0)
+    # the same points under a 99 % ceiling are 11 noises
+    assert dc.far(99.0 - dc.FAR_POINTS - 0.1, 99.0)
+    # under the low ceiling, a misfit beyond FAR_NOISE noises is far
+    beyond = 100.0 - 37.0 * math.sqrt(1.0 + (dc.FAR_NOISE + 0.2) ** 2)
+    assert dc.far(beyond, 63.0) and not dc.far(100.0 - 37.0 * math.sqrt(1.0 + (dc.FAR_NOISE - 0.2) ** 2), 63.0)
+    # many noises but within the points: not far
+    assert not dc.far(99.0 - dc.FAR_POINTS + 0.1, 99.0)
+    assert dc.far(float("nan"), 99.0)
+    # the verdict: a held joint's channel 10.1 points under its 63 % ceiling leaves the record explained,
+    # the same gap on a 99 % ceiling does not
+    def why(ceiling, fit):
+        c = {"j4": {"angle": ceiling}, "j2": {"angle": 99.5}}
+        f = {"j4": {"angle": fit}, "j2": {"angle": 99.4}}
+        return dc.unexplained_reasons(score=float(np.mean([fit, 99.4])), ceiling=float(np.mean([ceiling, 99.5])),
+                                      angle_fits={j: v["angle"] for j, v in f.items()}, residual_fails=True,
+                                      channel_fits=f, channel_ceilings=c)
+    assert not why(63.0, 63.0 - 10.1)
+    r = why(99.0, 99.0 - 10.1)
+    assert r and "angle fit on j4" in r[0] and "noises" in r[0]
+    assert not dc.misses_record({"j4": {"angle": 52.9, "score": 52.9}, "j2": {"angle": 99.4, "score": 99.4}},
+                                81.25, {"j4": {"angle": 63.0}, "j2": {"angle": 99.5}}, True)
+
+
 def test_unexplained_when_nothing_is_named_and_the_misfit_is_worth_more_than_a_named_cause_must_gain():
     """``no_significant_discrepancy`` says the model matches the record. Where the residual tests fail
     and the score sits more than the decision threshold under its noise ceiling, a candidate that
@@ -1022,12 +1055,15 @@ def test_unexplained_when_a_position_channel_misses_by_far_with_a_white_residual
                                       angle_fits={"j2": 98.0}, residual_fails=fails, channel_fits=fits,
                                       channel_ceilings=ceilings, **kw)
 
-    far = 90.0 - dc.FAR_POINTS - 1.0
+    far = 90.0 - dc.FAR_POINTS - 4.0                   # 2.2 noises of misfit
     r = why(far)
     assert r and "velocity fit on j2" in r[0] and "residual tests pass" in r[0] and "measured position" in r[0]
     assert why(far, named=True) and why(far, named=False)
     # within FAR_POINTS of its ceiling: the white remainder is noise
     assert not why(90.0 - dc.FAR_POINTS + 1.0)
+    # past the points but under FAR_NOISE noises (1.9): no disturbance larger than the noise it hides in
+    assert dc.misfit_in_noise(90.0 - dc.FAR_POINTS - 1.0, 90.0) < dc.FAR_NOISE
+    assert not why(90.0 - dc.FAR_POINTS - 1.0)
     # failing tests: the rule for a misfit of the motion speaks, not this one
     r = why(far, fails=True)
     assert r and "residual tests fail" in r[0] and "measured position" not in r[0]

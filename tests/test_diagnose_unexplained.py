@@ -19,6 +19,7 @@ import json
 import numpy as np
 import pytest
 from scipy import signal
+from sim_core.identification.decision import misfit_in_noise
 
 EFFECTS = ["delay", "deadband", "spool_lag"]
 MODE_HZ = 8.0
@@ -56,6 +57,8 @@ def test_an_unmodelled_8_hz_mode_is_unexplained_with_its_band(cli, tmp_path):
     assert d["selected"] == []
     u = d["unexplained"]
     assert u["because"] and u["score_ceiling"] - u["score"] > u["far_points"]
+    print("score noises", misfit_in_noise(u["score"], u["score_ceiling"]))
+    assert misfit_in_noise(u["score"], u["score_ceiling"]) > u["far_noise"]
     assert u["record_causes"] == []     # open loop: the command replayed is the command applied
     ev = u["evidence"]["j2"]
     lo, hi = ev["frequency"]["band_hz"]

@@ -45,7 +45,8 @@ The rules, in the order they apply:
 * verdict (:func:`verdict`, :func:`unexplained_reasons`): ``unexplained_discrepancy`` when the model
   (extended or not) still misses the record by far (an angle fit below zero, more than 10 points
   under the noise ceiling with failing residual tests, or the velocity more than 10 points under
-  its ceiling with a white residual), or when the named effects leave a chamber
+  its ceiling with a white residual; "far" also needs a misfit beyond the noise of twice the noise,
+  :func:`far`), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
   misfit on it, or when nothing is named while a joint's score sits more than 2 points under its
   ceiling with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when
@@ -72,7 +73,8 @@ SIGNIFICANCE = 3.0          # |value - null| / sigma of an identified parameter
 AMBIGUITY = 0.8             # runner-up gain above this share of the winner's: ambiguous
 MAX_EFFECTS = 3             # effects named per diagnosed joint (selection.effect_limit)
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
-FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record
+FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record ...
+FAR_NOISE = 2.0             # ... when its misfit beyond the noise is also this many times the noise (RMS)
 WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
 DRIFT_LOSS_POINTS = 0.5     # mean loss of the local channels that marks a stand-in for the replay's drift
 LOCAL_CHANNELS = ("restarted", "velocity")   # channels an open-loop replay does not integrate errors into
@@ -485,7 +487,7 @@ def misses_record(fits: dict[str, dict[str, float]], ceiling: float, channel_cei
                   residual_fails: bool, base_fits: dict[str, dict[str, float]] | None = None) -> bool:
     """Whether a model with these validation fits (joint -> channel -> fit, with its "score") would be
     reported as not explaining the record (:func:`unexplained_reasons`' rules on the fits alone: an
-    angle fit below zero, the score or one channel more than FAR_POINTS below its noise ceiling
+    angle fit below zero, the score or one channel missing its noise ceiling by far (:func:`far`)
     while the residual tests fail; with ``base_fits``, the baseline's fits, also a chamber pressure
     whose misfit the model's effects leave mostly open). The velocity far off with a white
     residual is not counted: that is a disturbance on the measured signal, which no other path of
@@ -815,15 +817,16 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
 
     * an angle fit below zero on a diagnosed joint: the model is further from the record than its
       mean is;
-    * its score more than FAR_POINTS below the noise ceiling while the residual tests fail (the
+    * its score missing the noise ceiling by far (:func:`far`: more than FAR_POINTS below it, and a
+      misfit beyond the noise of more than FAR_NOISE noises) while the residual tests fail (the
       misfit is in the data, not in the noise). Named effects that closed most of a runaway
       baseline's distance do not excuse it: a named cause must explain the record, not only beat
       the baseline (``base_score`` only says how much of the distance they closed);
     * one recorded channel (``channel_fits``: angle, velocity, pressure per joint) more than
-      FAR_POINTS below its own noise ceiling (``channel_ceilings``) while the residual tests fail:
+      missing its own noise ceiling (``channel_ceilings``) by far while the residual tests fail:
       a cause that fits the angle and leaves the chamber pressures as wrong as before has not
       explained the record, even when the mean over channels comes close;
-    * the velocity channel more than FAR_POINTS below its noise ceiling while the residual tests
+    * the velocity channel missing its noise ceiling by far while the residual tests
       pass: the joint's motion, driven by the command through its inertia, leaves a coloured
       residual where the model misses it; one that large and white is a disturbance on the measured
       position (:mod:`.sensor_disturbance`), which the noise ceiling (white noise on the position)
@@ -844,21 +847,21 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     if below:
         why.append("angle fit below zero on " + ", ".join(f"{j} ({f:.1f} %)" for j, f in below.items()))
     gap = ceiling - score
-    if gap > FAR_POINTS and residual_fails:
+    if far(score, ceiling) and residual_fails:
         text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} (more "
-                f"than {FAR_POINTS:g}) and its residual tests fail")
+                f"than {FAR_POINTS:g}, {_noises(score, ceiling)}) and its residual tests fail")
         if base_score is not None and base_score < score and ceiling > base_score:
             text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
                      f"baseline's distance")
         why.append(text)
     elif residual_fails and channel_fits and channel_ceilings:
-        far = far_channels(channel_fits, channel_ceilings)
-        if far:
-            why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+        off = far_channels(channel_fits, channel_ceilings)
+        if off:
+            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g}) and its residual tests fail")
     elif disturbance and not residual_fails and channel_fits and channel_ceilings:
-        far = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
-        if far:
-            why.append("the model's " + _far_text(far) + f" (more than {FAR_POINTS:g}) while its residual tests "
+        off = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
+        if off:
+            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g}) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
     short = joint_shortfall(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else None
@@ -875,7 +878,7 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             if c is None or f is None or b is None:
                 continue
             left, before = c - f, c - b
-            if left > FAR_POINTS and residual_fails:
+            if far(f, c) and residual_fails:
                 continue                    # already unexplained by the rules above
             if left > THRESHOLD_POINTS and not left <= (1.0 - EXPLAINED_SHARE) * before:
                 done = f"close {100 * (1.0 - left / before):.0f} %" if before > 0 else "do not close any"
@@ -903,18 +906,45 @@ def joint_shortfall(channel_fits: dict[str, dict[str, float]],
     return best
 
 
+def misfit_in_noise(fit: float, ceiling: float) -> float:
+    """RMS of a model's misfit beyond the noise, in units of the noise RMS, from its NRMSE fit and the
+    channel's noise ceiling (percent). The ceiling is the fit of a perfect model, so
+    (100 - fit) / (100 - ceiling) is the residual's norm over the noise's; the residual being the
+    misfit plus the noise, uncorrelated, the misfit is sqrt(ratio**2 - 1) noises. 0 at or above the
+    ceiling; inf where the ceiling is 100 (no noise) and the fit below it."""
+    spread, left = 100.0 - ceiling, 100.0 - fit
+    if not left > spread:
+        return 0.0 if left <= spread else math.inf
+    return math.inf if spread <= 0.0 else math.sqrt((left / spread) ** 2 - 1.0)
+
+
+def far(fit: float, ceiling: float) -> bool:
+    """Whether a fit misses its channel by far: more than FAR_POINTS below the noise ceiling, and a
+    misfit beyond the noise of more than FAR_NOISE times the noise. Points are shares of the
+    signal's spread; on a channel that barely moves in the validation part (a low ceiling: a joint
+    a loop holds) ten points are less than the noise, which no model can be judged by. On a channel
+    well above its noise ten points are many noises, and the points decide. A fit or ceiling that is
+    not a number counts as far."""
+    return not (ceiling - fit <= FAR_POINTS or misfit_in_noise(fit, ceiling) <= FAR_NOISE)
+
+
 def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
                  channels: tuple[str, ...] | None = None) -> list[tuple[str, str, float, float]]:
-    """(joint, channel, fit, ceiling) of every channel (of ``channels``, or any) more than FAR_POINTS
-    below its noise ceiling; a fit that is not a number counts as far."""
+    """(joint, channel, fit, ceiling) of every channel (of ``channels``, or any) whose fit misses its
+    noise ceiling by far (:func:`far`); a fit that is not a number counts as far."""
     return [(j, ch, f, channel_ceilings[j][ch]) for j, fits in channel_fits.items() for ch, f in fits.items()
             if (channels is None or ch in channels) and ch in channel_ceilings.get(j, {})
-            and not channel_ceilings[j][ch] - f <= FAR_POINTS]
+            and far(f, channel_ceilings[j][ch])]
 
 
-def _far_text(far: list[tuple[str, str, float, float]]) -> str:
-    return ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f}"
-                     for j, ch, f, c in far)
+def _far_text(off: list[tuple[str, str, float, float]]) -> str:
+    return ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f} "
+                     f"({_noises(f, c)})" for j, ch, f, c in off)
+
+
+def _noises(fit: float, ceiling: float) -> str:
+    m = misfit_in_noise(fit, ceiling)
+    return f"a misfit of {m:.1f} noises" if math.isfinite(m) else "a misfit on a channel without noise"
 
 
 def verdict(named: bool, unexplained: bool) -> str:

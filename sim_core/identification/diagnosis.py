@@ -35,7 +35,7 @@ from .closed_loop import detect as detect_closed_loop, validation_window
 from .command_hold import CHOICES as HOLD_CHOICES
 from .beyond_range import BeyondRange, stopped_at_an_end
 from .candidates import bank
-from .decision import (FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
+from .decision import (FAR_NOISE, FAR_POINTS, SIGNIFICANCE, final_check, misses_record, recalibration_kept,
                        residual_explained_pct, rivalry, unexplained_reasons, verdict)
 from .metrics import noise_std, nrmse_fit, velocity
 from .parameters import FreeParameter, free_parameter
@@ -115,6 +115,7 @@ class Diagnosis:
                 "residual_explained_pct": "share of the baseline's normalised residual a gain removes: "
                                           "100 gain / (100 - baseline score)",
                 "far_points": FAR_POINTS,
+                "far_noise": FAR_NOISE,
             },
             "validation": {"source": self.validation.source, "first_sample": self.split,
                            "start_s": float(self.validation.time[self.split]), "samples": int(self.validation.n - self.split),
@@ -795,6 +796,7 @@ def _unexplained(vrec: Record, vprob: oe.Problem, split: int, base_fits: dict, e
     causes = ([sensor_disturbance.cause(j, f) for j, f in disturbed.items()]
               + [mains_tone.cause(j, f) for j, f in mains.items()])
     out = {"because": why, "score": round(score, 3), "score_ceiling": round(ceiling, 3), "far_points": FAR_POINTS,
+           "far_noise": FAR_NOISE,
            "channel_ceilings": {j: {c: round(v, 3) for c, v in ch.items()} for j, ch in ceilings.items()},
            "residual_explained_pct": _pct(residual_explained_pct(score - _score(base_fits, joints), _score(base_fits, joints))),
            "closest": [{k: s[k] for k in ("effect", "joint", "params", "gain", "residual_explained_pct") if k in s}

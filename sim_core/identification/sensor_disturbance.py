@@ -11,7 +11,8 @@ A misfit of the joint's motion (an effect the model leaves out, a parameter off)
 joint's inertia and the command: its velocity residual is coloured over the motion's time scale
 (at the residual tests' 75 ms decimation, an 8 Hz mode the model lacks correlates -0.74 from one
 sample to the next, a command logged ten times slower than its controller +0.85). So the velocity
-channel more than FAR_POINTS below its noise ceiling while its residual is white is said as a cause in the record, ahead of the others, and decision.unexplained_reasons keeps any
+channel missing its noise ceiling by far (decision.far: more than FAR_POINTS below it, and a misfit of more
+than FAR_NOISE noises) while its residual is white is said as a cause in the record, ahead of the others, and decision.unexplained_reasons keeps any
 effect from being named on it. White here is a size, not a test: no autocorrelation of the
 decimated velocity residual beyond WHITE_RHO over its first 20 lags, so at most about that share
 of it is coloured. The Ljung-Box test finds a coloured share of a few percent in a 60 s record (the
@@ -33,7 +34,7 @@ WHITE_RHO = 0.3   # largest |autocorrelation| (lags 1-20, decimated) of a veloci
 def found(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
           tests: dict[str, dict]) -> dict[str, dict]:
     """Per joint whose velocity channel (``channel_fits``, percent, against ``channel_ceilings``)
-    sits more than FAR_POINTS below its noise ceiling while its residual is white
+    misses its noise ceiling by far (decision.far) while its residual is white
     (``tests``: diagnosis.residual_tests of the same model, with its ``autocorrelation``):
     {'channels': [(channel, fit, ceiling)], 'largest_autocorrelation'}."""
     out: dict[str, dict] = {}
