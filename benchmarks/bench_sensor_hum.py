@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from rig_records import closed_loop_record, write_headerless  # noqa: E402
 
 from sim_core.model.spec import load_robot  # noqa: E402
+from sim_core.identification.decision import misfit_in_noise  # noqa: E402
 
 RATE_HZ = 50.0   # the logger's rate (closed_loop_record's)
 
@@ -94,7 +95,8 @@ def main() -> int:
             print(f"seed {seed} hum {1e3 * amp:5.1f} mV  {d['verdict']:27s} {named or '-':28s} first cause "
                   f"{first:15s} baseline angle "
                   f"{d['baseline']['fit'][joint]:6.2f} (ceiling {d['data']['fit_ceiling'][joint]:.2f}), velocity "
-                  f"{ceil['velocity'] - fits['velocity']:5.1f} points under its ceiling", flush=True)
+                  f"{ceil['velocity'] - fits['velocity']:5.1f} points under its ceiling "
+                  f"({misfit_in_noise(fits['velocity'], ceil['velocity']):.2f} noises)", flush=True)
             cases += 1
             if amp == 0.0:
                 clean_wrong += d["verdict"] != "no_significant_discrepancy"

@@ -848,8 +848,8 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
         why.append("angle fit below zero on " + ", ".join(f"{j} ({f:.1f} %)" for j, f in below.items()))
     gap = ceiling - score
     if far(score, ceiling) and residual_fails:
-        text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} (more "
-                f"than {FAR_POINTS:g}, {_noises(score, ceiling)}) and its residual tests fail")
+        text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} ("
+                f"{_noises(score, ceiling)}; more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) and its residual tests fail")
         if base_score is not None and base_score < score and ceiling > base_score:
             text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
                      f"baseline's distance")
@@ -857,11 +857,11 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     elif residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings)
         if off:
-            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g}) and its residual tests fail")
+            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) and its residual tests fail")
     elif disturbance and not residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
         if off:
-            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g}) while its residual tests "
+            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
     short = joint_shortfall(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else None
@@ -938,8 +938,8 @@ def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: di
 
 
 def _far_text(off: list[tuple[str, str, float, float]]) -> str:
-    return ", ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f} "
-                     f"({_noises(f, c)})" for j, ch, f, c in off)
+    return "; ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f}, "
+                     f"{_noises(f, c)}" for j, ch, f, c in off)
 
 
 def _noises(fit: float, ceiling: float) -> str:
