@@ -57,7 +57,6 @@ def test_an_unmodelled_8_hz_mode_is_unexplained_with_its_band(cli, tmp_path):
     assert d["selected"] == []
     u = d["unexplained"]
     assert u["because"] and u["score_ceiling"] - u["score"] > u["far_points"]
-    print("score noises", misfit_in_noise(u["score"], u["score_ceiling"]))
     assert misfit_in_noise(u["score"], u["score_ceiling"]) > u["far_noise"]
     assert u["record_causes"] == []     # open loop: the command replayed is the command applied
     ev = u["evidence"]["j2"]

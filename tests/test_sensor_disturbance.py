@@ -33,7 +33,6 @@ def test_hum_on_the_position_sensor_is_unexplained_with_the_sensor_as_its_cause(
     assert len(rho) == 20 and max(map(abs, rho)) <= 0.3 and found["largest_autocorrelation"] == pytest.approx(
         max(map(abs, rho)), abs=1e-3)
     far = {c["channel"]: (c["ceiling"] - c["fit"], misfit_in_noise(c["fit"], c["ceiling"])) for c in found["channels"]}
-    print("velocity points, noises", far.get("velocity"))
     assert far["velocity"][0] > u["far_points"] and far["velocity"][1] > u["far_noise"]
     assert u["record_causes"][0].startswith("the position of lift carries a disturbance")
     assert "mains_tone" not in u      # 50 Hz at a 50 Hz log folds to near 0 Hz: a random walk, no line
