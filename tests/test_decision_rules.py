@@ -1016,6 +1016,32 @@ def test_unexplained_when_nothing_is_named_and_the_misfit_is_worth_more_than_a_n
     assert not why(over, named=None)
 
 
+def test_nothing_named_is_unexplained_only_with_a_misfit_of_more_than_a_noise():
+    """A joint homed before the validation part and held through it moves there by its noise (a
+    ceiling near 0): its score 12.8 points under that ceiling is half a noise of misfit, no cause to
+    name. Five points under a 95 % ceiling are 1.7 noises."""
+    def why(fit_j1, ceiling_j1):
+        fits = {"j1": {"angle": fit_j1}, "j2": {"angle": 99.4}}
+        ceilings = {"j1": {"angle": ceiling_j1}, "j2": {"angle": 99.5}}
+        return dc.unexplained_reasons(score=float(np.mean([fit_j1, 99.4])), ceiling=float(np.mean([ceiling_j1, 99.5])),
+                                      angle_fits={"j2": 99.4}, residual_fails=True, named=False,
+                                      channel_fits=fits, channel_ceilings=ceilings)
+    assert dc.misfit_in_noise(0.9 - 12.8, 0.9) < dc.WORTH_NOISE and not why(0.9 - 12.8, 0.9)
+    r = why(95.0 - 5.0, 95.0)                   # 1.7 noises
+    assert r and "nothing in the bank explains" in r[0] and "on j1" in r[0]
+    # a misfit of more than a noise under the low ceiling is worth naming
+    assert why(100.0 - 99.1 * math.sqrt(1.0 + (dc.WORTH_NOISE + 0.1) ** 2), 0.9)
+    assert not why(100.0 - 99.1 * math.sqrt(1.0 + (dc.WORTH_NOISE - 0.1) ** 2), 0.9)
+    # many noises within the points: not worth naming either
+    assert dc.misfit_in_noise(99.5 - 1.9, 99.5) > 3.0 and not why(99.5 - 1.9, 99.5)
+    assert dc.worth_naming(float("nan"), 50.0)
+    # without channel figures the record's score is judged the same way
+    assert not dc.unexplained_reasons(score=0.9 - 12.8, ceiling=0.9, angle_fits={"j": 99.0}, residual_fails=True,
+                                      named=False)
+    assert dc.unexplained_reasons(score=95.0 - 5.0, ceiling=95.0, angle_fits={"j": 99.0}, residual_fails=True,
+                                  named=False)
+
+
 def test_unexplained_when_one_channel_misses_by_far_though_the_score_comes_close():
     """A cause that fits angle and velocity and leaves the pressures as wrong as before (a valve with
     another flow law named as an asymmetry): the mean over channels is within FAR_POINTS of the ceiling,

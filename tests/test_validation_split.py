@@ -190,7 +190,9 @@ def test_a_record_of_four_joints_one_worked_on_after_the_others_hold_is_diagnose
 def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp_path):
     """j1 moved to its position in the first 2 s and held there, j2 stepped throughout: serving j1
     would leave j2 under 3 s to be fitted on, so the default split stays, and the report and the
-    terminal say that j1 is judged on a part in which it holds still."""
+    terminal say that j1 is judged on a part in which it holds still. The record is clean: j1's
+    channels there are its noise (a ceiling near 0), and ten-odd points under it are half a noise,
+    no misfit worth naming (it read unexplained, with the rig said to have changed)."""
     spec = load_robot("hydrolek")
     j2 = step_reference(spec, "j2", 30.0, RATE, seed=3)
     j1 = np.full(j2.size, float(spec.joint("j1").settings["initial_position"]) + 0.2)
@@ -202,3 +204,5 @@ def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp
     v = d["validation"]
     assert v["start_s"] == pytest.approx(18.0, abs=0.05) and v["moved"] is None
     assert "validation part holds still on j1" in v["kept"] and f"validated on: {v['kept']}" in proc.stdout
+    assert d["decision"]["channel_ceilings"]["j1"]["angle"] < 20.0
+    assert d["verdict"] == "no_significant_discrepancy", d["unexplained"]

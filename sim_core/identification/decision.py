@@ -48,8 +48,9 @@ The rules, in the order they apply:
   its ceiling with a white residual; "far" also needs a misfit beyond the noise of twice the noise,
   :func:`far`), or when the named effects leave a chamber
   pressure more than 2 points under its ceiling having closed less than 85 % of the baseline's
-  misfit on it, or when nothing is named while a joint's score sits more than 2 points under its
-  ceiling with failing residual tests (a misfit the bank has no name for), ``discrepancy`` when
+  misfit on it, or when nothing is named while a joint's score sits more than 2 points and one
+  noise (:func:`worth_naming`) under its ceiling with failing residual tests (a misfit the bank has
+  no name for), ``discrepancy`` when
   effects are named, ``no_significant_discrepancy`` otherwise.
 
 Every rule that weighs points weighs them on the joints in question (the candidate's, the effect's,
@@ -75,6 +76,7 @@ MAX_EFFECTS = 3             # effects named per diagnosed joint (selection.effec
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record ...
 FAR_NOISE = 2.0             # ... when its misfit beyond the noise is also this many times the noise (RMS)
+WORTH_NOISE = 1.0           # a misfit (beyond the noise, RMS) under this many noises is not worth naming
 WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
 DRIFT_LOSS_POINTS = 0.5     # mean loss of the local channels that marks a stand-in for the replay's drift
 LOCAL_CHANNELS = ("restarted", "velocity")   # channels an open-loop replay does not integrate errors into
@@ -838,8 +840,9 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
       see the velocity residual only; a cause that fits the motion and leaves much of a pressure
       misfit (a Coulomb friction standing for a Stribeck curve, a leak for a low supply pressure)
       is the closest effect, not the cause;
-    * nothing named (``named`` False) while the score sits more than THRESHOLD_POINTS below the noise
-      ceiling and the residual tests fail: the record shows a misfit worth more than any gain that
+    * nothing named (``named`` False) while a joint's score (the record's, without channel figures)
+      sits more than THRESHOLD_POINTS and WORTH_NOISE noises below its noise ceiling
+      (:func:`worth_naming`) and the residual tests fail: the record shows a misfit worth more than any gain that
       counts, and neither the calibration nor a candidate explains it. ``no_significant_discrepancy``
       would say the model matches the record; it does not. ``named`` None: this rule is not applied."""
     why = []
@@ -864,13 +867,16 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
             why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
-    short = joint_shortfall(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else None
-    if not why and named is False and residual_fails and (short[1] if short else gap) > THRESHOLD_POINTS:
+    by_joint = bool(channel_fits and channel_ceilings and joint_shortfall(channel_fits, channel_ceilings))
+    short = (joint_shortfall(channel_fits, channel_ceilings, worth=True) if by_joint
+             else ("", gap, score, ceiling) if worth_naming(score, ceiling) else None)
+    if not why and named is False and residual_fails and short:
         where = (f"on {short[0]} the model's score {short[2]:.1f} is {short[1]:.1f} points below its noise ceiling "
-                 f"{short[3]:.1f}" if short and len(channel_fits) > 1 else
-                 f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f}")
-        why.append(f"nothing in the bank explains the misfit the residual tests show: {where}, more than the "
-                   f"{THRESHOLD_POINTS:g} points a named cause must gain")
+                 f"{short[3]:.1f}" if by_joint and len(channel_fits) > 1 else
+                 f"the model's score {short[2]:.1f} is {short[1]:.1f} points below its noise ceiling {short[3]:.1f}")
+        why.append(f"nothing in the bank explains the misfit the residual tests show: {where} ("
+                   f"{_noises(short[2], short[3])}), more than the {THRESHOLD_POINTS:g} points a named cause must "
+                   f"gain and {WORTH_NOISE:g} noise")
     if base_channel_fits and channel_fits and channel_ceilings:
         for j, fits in channel_fits.items():
             c = channel_ceilings.get(j, {}).get("pressure")
@@ -888,12 +894,13 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     return why
 
 
-def joint_shortfall(channel_fits: dict[str, dict[str, float]],
-                    channel_ceilings: dict[str, dict[str, float]]) -> tuple[str, float, float, float] | None:
+def joint_shortfall(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
+                    worth: bool = False) -> tuple[str, float, float, float] | None:
     """(joint, points, score, ceiling) of the joint furthest below its own noise ceiling: its score
     (the mean of its channel fits) against the mean of its channels' ceilings. A misfit on one of ten
     joints moves their mean by a tenth, so the record is judged joint by joint; on one joint this is
-    the record's score against its ceiling. None without a joint whose channels have ceilings."""
+    the record's score against its ceiling. ``worth``: of the joints whose misfit is worth naming
+    (:func:`worth_naming`) only. None without such a joint whose channels have ceilings."""
     best = None
     for j, fits in channel_fits.items():
         chans = [c for c in fits if c in channel_ceilings.get(j, {})]
@@ -901,9 +908,21 @@ def joint_shortfall(channel_fits: dict[str, dict[str, float]],
             continue
         f = float(np.mean([fits[c] for c in chans]))
         c = float(np.mean([channel_ceilings[j][k] for k in chans]))
+        if worth and not worth_naming(f, c):
+            continue
         if best is None or not c - f <= best[1]:
             best = (j, c - f, f, c)
     return best
+
+
+def worth_naming(fit: float, ceiling: float) -> bool:
+    """Whether a model this far below its noise ceiling leaves a misfit a named cause could gain on:
+    more than THRESHOLD_POINTS, and a misfit beyond the noise of more than WORTH_NOISE noises
+    (:func:`misfit_in_noise`). A joint homed at the start of a record and held through its
+    validation part moves there by its noise alone (a ceiling near 0): two points of that spread
+    are a fifth of a noise, what an estimate of the noise a few percent off makes of a perfect model.
+    A fit or ceiling that is not a number is worth it."""
+    return not (ceiling - fit <= THRESHOLD_POINTS or misfit_in_noise(fit, ceiling) <= WORTH_NOISE)
 
 
 def misfit_in_noise(fit: float, ceiling: float) -> float:
