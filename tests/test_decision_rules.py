@@ -1166,6 +1166,13 @@ def test_unexplained_when_an_angle_fit_is_below_zero():
     assert r and "j3" in r[0] and "j2" not in r[0]
     assert dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": -math.inf}, residual_fails=False)
     assert not dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": 0.5}, residual_fails=False)
+    # a joint held through the validation part (its angle's ceiling near 0): below zero by less than
+    # FAR_NOISE noises is its noise; by more, or under a ceiling well above its noise, it is not
+    held = lambda f, c: dc.unexplained_reasons(score=99.0, ceiling=99.5, angle_fits={"j2": 99.0, "j3": f},
+                                               residual_fails=False, channel_fits={"j2": {"angle": 99.0}, "j3": {"angle": f}},
+                                               channel_ceilings={"j2": {"angle": 99.5}, "j3": {"angle": c}})
+    assert not held(-8.0, 1.0)
+    assert held(-8.0, 70.0) and held(1.0 - 99.0 * math.sqrt(1.0 + (dc.FAR_NOISE + 0.1) ** 2), 1.0)
 
 
 # ---- residual evidence ----------------------------------------------------------------------------

@@ -818,7 +818,9 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     explain the record; empty when it does.
 
     * an angle fit below zero on a diagnosed joint: the model is further from the record than its
-      mean is;
+      mean is; where the angle's ceiling is known, with a misfit of more than FAR_NOISE noises (a
+      joint held through the validation part moves there by its noise, and its mean is as good a
+      model as any);
     * its score missing the noise ceiling by far (:func:`far`: more than FAR_POINTS below it, and a
       misfit beyond the noise of more than FAR_NOISE noises) while the residual tests fail (the
       misfit is in the data, not in the noise). Named effects that closed most of a runaway
@@ -846,7 +848,9 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
       counts, and neither the calibration nor a candidate explains it. ``no_significant_discrepancy``
       would say the model matches the record; it does not. ``named`` None: this rule is not applied."""
     why = []
-    below = {j: f for j, f in angle_fits.items() if not f >= 0.0}
+    angle_ceiling = {j: c["angle"] for j, c in (channel_ceilings or {}).items() if "angle" in c}
+    below = {j: f for j, f in angle_fits.items()
+             if not f >= 0.0 and not misfit_in_noise(f, angle_ceiling.get(j, math.nan)) <= FAR_NOISE}
     if below:
         why.append("angle fit below zero on " + ", ".join(f"{j} ({f:.1f} %)" for j, f in below.items()))
     gap = ceiling - score
