@@ -187,13 +187,17 @@ def test_a_record_of_four_joints_one_worked_on_after_the_others_hold_is_diagnose
     assert d["selected"][0]["params"]["ratio"] == pytest.approx(0.6, rel=0.05)
 
 
-def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp_path):
+@pytest.mark.parametrize("deadband_v", [None, 0.5])
+def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp_path, deadband_v):
     """j1 moved to its position in the first 2 s and held there, j2 stepped throughout: serving j1
     would leave j2 under 3 s to be fitted on, so the default split stays, and the report and the
-    terminal say that j1 is judged on a part in which it holds still. The record is clean: j1's
-    channels there are its noise (a ceiling near 0), and ten-odd points under it are half a noise,
-    no misfit worth naming (it read unexplained, with the rig said to have changed)."""
+    terminal say that j1 is judged on a part in which it holds still. j1's channels there are its
+    noise (a ceiling near 0), and ten-odd points under it are half a noise: clean, the record reads
+    clean (it read unexplained, with the rig said to have changed); with a deadband on j2 the
+    deadband is named (it read unexplained: j1's restarted angle 24 points under its ceiling)."""
     spec = load_robot("hydrolek")
+    if deadband_v:
+        spec.enable_effect("deadband", "j2", width=deadband_v)
     j2 = step_reference(spec, "j2", 30.0, RATE, seed=3)
     j1 = np.full(j2.size, float(spec.joint("j1").settings["initial_position"]) + 0.2)
     write_csv(tmp_path / "homed.csv", loops_columns(spec, {"j1": j1, "j2": j2}, kp=15.0))
@@ -205,4 +209,9 @@ def test_a_joint_homed_at_the_start_keeps_the_default_split_and_says_so(cli, tmp
     assert v["start_s"] == pytest.approx(18.0, abs=0.05) and v["moved"] is None
     assert "validation part holds still on j1" in v["kept"] and f"validated on: {v['kept']}" in proc.stdout
     assert d["decision"]["channel_ceilings"]["j1"]["angle"] < 20.0
-    assert d["verdict"] == "no_significant_discrepancy", d["unexplained"]
+    if deadband_v is None:
+        assert d["verdict"] == "no_significant_discrepancy", d["unexplained"]
+    else:
+        assert d["verdict"] == "discrepancy", d["unexplained"]
+        assert [(x["effect"], x["joint"]) for x in d["selected"]] == [("deadband", "j2")]
+        assert d["selected"][0]["params"]["width"] == pytest.approx(deadband_v, rel=0.05)
