@@ -856,7 +856,7 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     gap = ceiling - score
     if far(score, ceiling) and residual_fails:
         text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} ("
-                f"{_noises(score, ceiling)}; more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) and its residual tests fail")
+                f"{_noises(score, ceiling)}; {_FAR_MARK}) and its residual tests fail")
         if base_score is not None and base_score < score and ceiling > base_score:
             text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
                      f"baseline's distance")
@@ -864,16 +864,16 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     elif residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings)
         if off:
-            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) and its residual tests fail")
+            why.append("the model's " + _far_text(off) + f" ({_FAR_MARK}) and its residual tests fail")
     elif disturbance and not residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
         if off:
-            why.append("the model's " + _far_text(off) + f" (more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises) while its residual tests "
+            why.append("the model's " + _far_text(off) + f" ({_FAR_MARK}) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
-    by_joint = bool(channel_fits and channel_ceilings and joint_shortfall(channel_fits, channel_ceilings))
-    short = (joint_shortfall(channel_fits, channel_ceilings, worth=True) if by_joint
-             else ("", gap, score, ceiling) if worth_naming(score, ceiling) else None)
+    scores = joint_scores(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else {}
+    by_joint = bool(scores)
+    short = _furthest({j: fc for j, fc in (scores or {"": (score, ceiling)}).items() if worth_naming(*fc)})
     if not why and named is False and residual_fails and short:
         where = (f"on {short[0]} the model's score {short[2]:.1f} is {short[1]:.1f} points below its noise ceiling "
                  f"{short[3]:.1f}" if by_joint and len(channel_fits) > 1 else
@@ -898,22 +898,32 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     return why
 
 
-def joint_shortfall(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
-                    worth: bool = False) -> tuple[str, float, float, float] | None:
-    """(joint, points, score, ceiling) of the joint furthest below its own noise ceiling: its score
-    (the mean of its channel fits) against the mean of its channels' ceilings. A misfit on one of ten
-    joints moves their mean by a tenth, so the record is judged joint by joint; on one joint this is
-    the record's score against its ceiling. ``worth``: of the joints whose misfit is worth naming
-    (:func:`worth_naming`) only. None without such a joint whose channels have ceilings."""
-    best = None
+def joint_scores(channel_fits: dict[str, dict[str, float]],
+                 channel_ceilings: dict[str, dict[str, float]]) -> dict[str, tuple[float, float]]:
+    """joint -> (score, ceiling) of each joint whose channels have ceilings: the mean of its channel
+    fits against the mean of those channels' ceilings."""
+    out = {}
     for j, fits in channel_fits.items():
         chans = [c for c in fits if c in channel_ceilings.get(j, {})]
-        if not chans:
-            continue
-        f = float(np.mean([fits[c] for c in chans]))
-        c = float(np.mean([channel_ceilings[j][k] for k in chans]))
-        if worth and not worth_naming(f, c):
-            continue
+        if chans:
+            out[j] = (float(np.mean([fits[c] for c in chans])), float(np.mean([channel_ceilings[j][k] for k in chans])))
+    return out
+
+
+def joint_shortfall(channel_fits: dict[str, dict[str, float]],
+                    channel_ceilings: dict[str, dict[str, float]]) -> tuple[str, float, float, float] | None:
+    """(joint, points, score, ceiling) of the joint furthest below its own noise ceiling
+    (:func:`joint_scores`). A misfit on one of ten joints moves their mean by a tenth, so the record
+    is judged joint by joint; on one joint this is the record's score against its ceiling. None
+    without a joint whose channels have ceilings."""
+    return _furthest(joint_scores(channel_fits, channel_ceilings))
+
+
+def _furthest(scores: dict[str, tuple[float, float]]) -> tuple[str, float, float, float] | None:
+    """(joint, points, score, ceiling) of the joint of ``scores`` furthest below its ceiling (one whose
+    gap is not a number first); None for none."""
+    best = None
+    for j, (f, c) in scores.items():
         if best is None or not c - f <= best[1]:
             best = (j, c - f, f, c)
     return best
@@ -926,7 +936,7 @@ def worth_naming(fit: float, ceiling: float) -> bool:
     validation part moves there by its noise alone (a ceiling near 0): two points of that spread
     are a fifth of a noise, what an estimate of the noise a few percent off makes of a perfect model.
     A fit or ceiling that is not a number is worth it."""
-    return not (ceiling - fit <= THRESHOLD_POINTS or misfit_in_noise(fit, ceiling) <= WORTH_NOISE)
+    return _short_of(fit, ceiling, THRESHOLD_POINTS, WORTH_NOISE)
 
 
 def misfit_in_noise(fit: float, ceiling: float) -> float:
@@ -948,7 +958,13 @@ def far(fit: float, ceiling: float) -> bool:
     a loop holds) ten points are less than the noise, which no model can be judged by. On a channel
     well above its noise ten points are many noises, and the points decide. A fit or ceiling that is
     not a number counts as far."""
-    return not (ceiling - fit <= FAR_POINTS or misfit_in_noise(fit, ceiling) <= FAR_NOISE)
+    return _short_of(fit, ceiling, FAR_POINTS, FAR_NOISE)
+
+
+def _short_of(fit: float, ceiling: float, points: float, noises: float) -> bool:
+    """More than ``points`` below the noise ceiling and more than ``noises`` noises of misfit
+    (:func:`misfit_in_noise`); a fit or ceiling that is not a number is."""
+    return not (ceiling - fit <= points or misfit_in_noise(fit, ceiling) <= noises)
 
 
 def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: dict[str, dict[str, float]],
@@ -963,6 +979,9 @@ def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: di
 def _far_text(off: list[tuple[str, str, float, float]]) -> str:
     return "; ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f}, "
                      f"{_noises(f, c)}" for j, ch, f, c in off)
+
+
+_FAR_MARK = f"more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises"
 
 
 def _noises(fit: float, ceiling: float) -> str:

@@ -13,11 +13,12 @@ joint's inertia and the command: its velocity residual is coloured over the moti
 sample to the next, a command logged ten times slower than its controller +0.85). So the velocity
 channel missing its noise ceiling by far (decision.far: more than FAR_POINTS below it, and a misfit
 of more than FAR_NOISE noises) while its residual is white is said as a cause in the record, ahead
-of the others, and decision.unexplained_reasons keeps any effect from being named on it. White here is a size, not a test: no autocorrelation of the
-decimated velocity residual beyond WHITE_RHO over its first 20 lags, so at most about that share
-of it is coloured. The Ljung-Box test finds a coloured share of a few percent in a 60 s record (the
-model's own small misfit beside the disturbance: |rho| up to 0.18, p = 0.004 under 60 mV of hum on
-the rotary rig), which does not make the far misfit the motion's.
+of the others, and decision.unexplained_reasons keeps any effect from being named on it. White here
+is a size, not a test: no autocorrelation of the decimated velocity residual beyond WHITE_RHO over
+its first 20 lags, so at most about that share of it is coloured. The Ljung-Box test finds a
+coloured share of a few percent in a 60 s record (the model's own small misfit beside the
+disturbance: |rho| up to 0.18, p = 0.004 under 60 mV of hum on the rotary rig), which does not make
+the far misfit the motion's.
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ def cause(joint: str, finding: dict) -> str:
     chans = ", ".join(f"{ch} fit {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f} (a misfit of "
                       f"{misfit_in_noise(f, c):.1f} noises)" for ch, f, c in finding["channels"])
     return (f"the position of {joint} carries a disturbance no motion of the joint makes: its {chans} (more than "
-            f"{FAR_POINTS:g} and {FAR_NOISE:g} noises), and the velocity residual is white (no autocorrelation beyond "
+            f"{FAR_POINTS:g} points and {FAR_NOISE:g} noises), and the velocity residual is white (no "
+            "autocorrelation beyond "
             f"{finding['largest_autocorrelation']:.2f}) where a misfit of the motion, driven through the joint's "
             "inertia, is coloured. Interference on the sensor's wiring aliased by the logger (mains hum sampled near "
             "50 Hz), a worn or dirty potentiometer track or a loose connector do this. Shield the sensor's cable or "
