@@ -44,7 +44,11 @@ closed loop, a joint's line dynamics on the rig that records no pressure) left n
 summary gives the share right among those whose effects show, beside the share of all.
 
     .venv/bin/python benchmarks/bench_diagnose_matrix.py [--seeds 3] [--groups singles,pairs,clean,out_of_bank]
-        [--robots hydrolek,rig] [--only TEXT] [--results FILE.jsonl] [--json FILE]
+        [--robots hydrolek,rig] [--templates boom] [--only TEXT] [--results FILE.jsonl] [--json FILE]
+
+``--templates boom,cylinder,rotary`` makes the rig's singles and clean records on each of those
+templates (``rig new``; the scored matrix's is the boom alone): a check on rigs the thresholds were
+not tuned on.
 
 ``--results`` keeps every finished case (one JSON line each) and skips them on the next run, so a long
 matrix can be run in parts. About 20-40 s per case on a 2-core machine.
@@ -77,6 +81,7 @@ from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
 from sim_core.identification.metrics import noise_std  # noqa: E402
 from sim_core.model.spec import load_robot  # noqa: E402
+from sim_core.rigs.knobs import TEMPLATE_KNOBS  # noqa: E402
 
 GOALS = {"singles_right_pct": (">=", 95.0), "pairs_right_pct": (">=", 80.0), "clean_false_alarm_pct": ("<=", 0.0),
          "out_of_bank_wrong_pct": ("<=", 10.0), "worst_param_error_pct": ("<=", 10.0)}
@@ -383,12 +388,13 @@ GROUPS = ("singles", "pairs", "clean", "out_of_bank")
 ROBOTS = ("hydrolek", "rig")
 
 
-def build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
+def build(seeds: int, groups: set[str], robots: set[str], templates: tuple[str, ...] = ("boom",)) -> list[dict]:
     """The selected cases, each drawn as in the whole matrix: a case's magnitude and noise come from its
     name (:func:`case_key`), so ``--groups``/``--robots`` select cases without changing them, and an
     effect added to the bank adds its own cases without changing the others' (``--robots`` selects
-    the singles and clean records; pairs and out-of-bank cases name their own)."""
-    return [c for c in _build(seeds, set(GROUPS), set(ROBOTS))
+    the singles and clean records; pairs and out-of-bank cases name their own). ``templates``: the
+    rig templates whose singles and clean records are made (the scored matrix's is the boom)."""
+    return [c for c in _build(seeds, set(GROUPS), set(ROBOTS), templates)
             if c["group"] in groups and (c["group"] in ("pairs", "out_of_bank") or c["robot"] in robots)]
 
 
@@ -397,7 +403,7 @@ def case_key(case_id: str) -> int:
     return zlib.crc32(case_id.encode()) % 100_000
 
 
-def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
+def _build(seeds: int, groups: set[str], robots: set[str], templates: tuple[str, ...] = ("boom",)) -> list[dict]:
     cases = []
     if "singles" in groups:
         if "hydrolek" in robots:
@@ -409,18 +415,18 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
                               "joint": JOINT, "seed": 100 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3],
                               "noise": float(rng.uniform(2e-4, 1e-3)),
                               "hidden": [(effect, j, magnitude(effect, spec, JOINT, k, seeds, rng))]})
-        if "rig" in robots:
+        for template in (templates if "rig" in robots else ()):
             tmp = Path(tempfile.mkdtemp())
-            cli("rig", "new", "boom", "--out", tmp / "rig")
+            cli("rig", "new", template, "--out", tmp / "rig")
             spec = load_robot(tmp / "rig")
             joint = spec.joint_names[0]
             for (effect, j), k in itertools.product(offered(spec, joint), range(seeds)):
                 if j is None:       # the rig generator hides effects on its joint
                     continue
-                cid = f"single/rig_boom/{effect}/{k + 1}"
+                cid = f"single/rig_{template}/{effect}/{k + 1}"
                 rng = np.random.default_rng([2000 + k, case_key(cid)])
                 cases.append({"id": cid, "group": "singles", "robot": "rig",
-                              "template": "boom", "joint": joint, "seed": 200 + k,
+                              "template": template, "joint": joint, "seed": 200 + k,
                               "hidden": [(effect, j, magnitude(effect, spec, joint, k, seeds, rng))]})
             shutil.rmtree(tmp, ignore_errors=True)
     if "pairs" in groups:
@@ -450,9 +456,9 @@ def _build(seeds: int, groups: set[str], robots: set[str]) -> list[dict]:
                               "seed": 400 + k, "excitation": ("prbs", "multisine", "doublets")[k % 3], "rate": 50.0,
                               "jitter": True, "start_offset": (-0.04, 0.05, 0.03)[k % 3],
                               "quantum": 2 * np.pi / 4096, "noise": 1e-3, "hidden": []})
-            if "rig" in robots:
-                cases.append({"id": f"clean/rig_boom/{k + 1}", "group": "clean", "robot": "rig", "template": "boom",
-                              "seed": 450 + k, "hidden": []})
+            for template in (templates if "rig" in robots else ()):
+                cases.append({"id": f"clean/rig_{template}/{k + 1}", "group": "clean", "robot": "rig",
+                              "template": template, "seed": 450 + k, "hidden": []})
     if "out_of_bank" in groups:
         oob = [("supply_-15%", {"set": ["--set", "supply.pressure=13.6e6"]}),
                ("bulk_modulus_-15%", {"set": ["--set", "fluid.bulk_modulus=1.19e9"]}),
@@ -623,6 +629,14 @@ def given_true_held(r: dict) -> float:
     return r["param_error_pct"] if e is None else e
 
 
+def said_as_well(r: dict) -> bool:
+    """A wrong record whose report says a hidden effect's parameter, freed beyond the range the rig's
+    spec declares for it, explains the record as well as the effect it named (``as_well_beyond_range``:
+    the record does not tell them apart; the spec's range kept the effect named)."""
+    beyond = r.get("as_well_beyond_range", [])
+    return not r["right"] and any(b.startswith(f"effects.{n}.") for b in beyond for n, _, _ in r["hidden"])
+
+
 def summary(rows: list[dict]) -> dict:
     def pct(sel, key="right"):
         return round(100 * sum(bool(r[key]) for r in sel) / len(sel), 1) if sel else None
@@ -642,6 +656,7 @@ def summary(rows: list[dict]) -> dict:
         "singles_right_pct": pct(g["singles"]), "pairs_right_pct": pct(g["pairs"]),
         "singles_traced": len(traced), "singles_visible": len(visible), "singles_visible_right_pct": pct(visible),
         "wrong_but_flagged_ambiguous_with_truth": len(flagged),
+        "wrong_but_said_as_well_beyond_range": sum(said_as_well(r) for r in g["singles"] + g["pairs"]),
         "pairs_traced": len(traced_pairs), "pairs_visible": len(visible_pairs), "pairs_visible_right_pct": pct(visible_pairs),
         "clean_false_alarm_pct": None if not g["clean"] else round(100 - pct(g["clean"]), 1),
         "out_of_bank_wrong_pct": None if not g["out_of_bank"] else round(100 - pct(g["out_of_bank"]), 1),
@@ -669,11 +684,19 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--groups", default=",".join(GROUPS))
     ap.add_argument("--robots", default=",".join(ROBOTS))
+    ap.add_argument("--templates", default="boom",
+                    help="rig templates for the rig's singles and clean records (boom: the scored matrix; "
+                         f"any of {', '.join(TEMPLATE_KNOBS)})")
     ap.add_argument("--only", help="run the cases whose id contains this text")
     ap.add_argument("--results", help="JSON-lines file of finished cases: appended to, and skipped on a re-run")
     ap.add_argument("--json", metavar="FILE", help="write the summary and every case as JSON")
     args = ap.parse_args()
-    cases = build(args.seeds, set(args.groups.split(",")), set(args.robots.split(",")))
+    templates = tuple(t.strip() for t in args.templates.split(",") if t.strip())
+    unknown = [t for t in templates if t not in TEMPLATE_KNOBS]
+    if unknown or not templates:
+        ap.error(f"--templates: unknown template {', '.join(unknown) or '(none given)'}; "
+                 f"expected some of {', '.join(TEMPLATE_KNOBS)}")
+    cases = build(args.seeds, set(args.groups.split(",")), set(args.robots.split(",")), templates)
     if args.only:
         cases = [c for c in cases if args.only in c["id"]]
     done = {}
@@ -746,6 +769,8 @@ def main() -> int:
               f"{s['singles_said_shown_right_pct']:.1f} % (the hidden magnitude at or above 'shows from'; beside the score)")
     print(f"  {'wrong but marked ambiguous':38s} {s['wrong_but_flagged_ambiguous_with_truth']} singles or pairs "
           f"(the hidden effect is the runner-up)")
+    print(f"  {'wrong, the truth said to do as well':38s} {s['wrong_but_said_as_well_beyond_range']} singles or pairs "
+          f"(a hidden effect's parameter beyond its declared range explains the record as well as the named effect)")
     print(f"  {'sensor interference said':38s} {s['sensor_causes_said']} records (none carries any: want 0)")
     print(f"  {'the rig said to change':38s} {s['drift_said']} records (none changes: want 0)")
     med = s["median_diagnose_s"]
