@@ -190,3 +190,28 @@ def test_reported_numbers_keep_six_significant_digits():
     assert _num(3.21e-13) == pytest.approx(3.21e-13, rel=1e-6, abs=0)
     assert _num(1234567.891) == 1234570.0
     assert _num(float("nan")) is None and _num(None) is None
+
+
+def test_a_named_parameter_is_reported_at_its_null_only_where_the_fit_it_comes_from_left_it_there():
+    """A leak whose round fit put the piston leak on its lower bound (none) and the rest to tank: once
+    the part to tank is held at none and the leak refitted, the piston leak carries it, off that
+    bound. The value reported is the final refit's, so is the bound it is judged on: the round's is
+    stale (a named leak of 0 is no finding)."""
+    from sim_core.identification import output_error as oe
+    from sim_core.identification.candidates import Candidate
+    from sim_core.identification.decision import Evaluation
+    from sim_core.identification.diagnosis import _absent, _bound_of
+    from sim_core.identification.parameters import FreeParameter
+
+    key = "effects.leakage.swing.internal"
+    fp = FreeParameter(key, 1e-15, 3e-10, log=True, null=0.0)      # the bank's piston leak
+    ev = Evaluation(Candidate("leakage", "swing", [fp]), {key: 0.0}, {}, {}, 1.0, {}, bounds={key: "lower"})
+    final = oe.FitResult([fp], {key: 7.7e-14}, 1.0)
+    assert _bound_of(key, final, ev) is None
+    assert _absent(fp, 7.7e-14, _bound_of(key, final, ev)) == 7.7e-14
+    # no final refit, or one that did not fit it: the round's bound, and a value on its null is the null
+    assert _bound_of(key, None, ev) == "lower"
+    assert _bound_of(key, oe.FitResult([], {}, 1.0), ev) == "lower"
+    assert _absent(fp, 1e-15, "lower") == 0.0
+    # where the final refit itself stops it there, it is reported there too
+    assert _absent(fp, 1e-15, _bound_of(key, oe.FitResult([fp], {key: 1e-15}, 1.0), ev)) == 0.0

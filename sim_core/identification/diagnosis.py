@@ -543,7 +543,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         for fp in c.free:
             name = fp.key.split(".")[-1]
             v = final.values[fp.key] if final is not None else ev.values[fp.key]
-            params[name] = _absent(fp, v, ev)
+            params[name] = _absent(fp, v, _bound_of(fp.key, final, ev))
             lo_hi = (final.ci95 if final is not None else ev.ci95).get(fp.key, [v, v])
             ci[name] = [float(lo_hi[0]), float(lo_hi[1])]
         for name, v in ev.held_at_default.items():    # what the record does not show apart from the rest
@@ -870,11 +870,21 @@ def _contributions(base_spec, model, chosen: list[Evaluation], runner: Runner, p
     return worth
 
 
-def _absent(fp: FreeParameter, v: float, ev: Evaluation) -> float:
-    """A parameter that ended where its effect vanishes is reported at that value."""
+def _bound_of(key: str, final, ev: Evaluation) -> str | None:
+    """The search bound ('lower'/'upper') the reported value of ``key`` sits on, if any: the final
+    refit's where it fitted that parameter (the value reported is its own), else the round's fit. A
+    round's bound is stale once a refit moved the value (a leak's external part held at none, its
+    internal part takes the leak off the bound where the round had left it)."""
+    if final is not None and any(f.key == key for f in final.free):
+        return final.at_bound(key)
+    return ev.bounds.get(key)
+
+
+def _absent(fp: FreeParameter, v: float, side: str | None) -> float:
+    """A parameter that ended where its effect vanishes (on the search bound ``side`` that is its
+    null) is reported at that value."""
     null = fp.null
-    if ev.bounds.get(fp.key) and null is not None and math.isfinite(null):
-        side = ev.bounds[fp.key]
+    if side and null is not None and math.isfinite(null):
         if (side == "lower" and null <= fp.lower) or (side == "upper" and null >= fp.upper):
             return float(null)
     return float(v)
