@@ -7,9 +7,7 @@ pushing it there). But the range is the user's guess too: a 10 kg load on a rig 
 moves it as no effect of the bank does, and a candidate that makes up some of it (a 1 % valve
 asymmetry for the load's pull) was named without a word about the load. So such a parameter is a stand-in for
 every named effect (decision.stand_in), freed beyond the end it stopped at by as much as its range
-is wide (inside the parameter's physical bounds), in the effect's place, and again as far once more
-where it stops at that new end (:meth:`BeyondRange.further`: a load declared 50-205 kg that is 3 kg
-lies past the first widening's 12 kg). Where it explains the
+is wide (inside the parameter's physical bounds), in the effect's place. Where it explains the
 record by the threshold better than the effect (with its value outside the declared range, not
 inside), the effect was standing in for it: a calibration finding, the range the one to correct.
 Where as well (the load's pull and a valve asymmetry set the same up/down speeds on a record
@@ -40,7 +38,7 @@ def stopped_at_an_end(spec, changes: list[dict], free: list[FreeParameter], nuis
         side = at_bound(fp, row["fitted"])
         if side is not None:
             p = declared(spec, fp.key)
-            wide = widened(fp, side, (p.lower, p.upper), (fp.lower, fp.upper))
+            wide = widened(fp, side, (p.lower, p.upper))
             if wide is not None:
                 out.append(wide)
     # tried in the calibration's own order of what a rig's user least knows (calibration.KEEP_ORDER:
@@ -55,28 +53,16 @@ class BeyondRange(FreeParameter):
     refit of the others, not the range."""
 
     declared: tuple[float, float] = (-math.inf, math.inf)
-    side: str = ""                                        # the end it was widened at: 'lower' or 'upper'
-    physical: tuple[float, float] = (-math.inf, math.inf)  # the bounds the model declares for it
 
     def within_declared(self, value: float) -> str | None:
         """Why ``value`` is no finding beyond the range (it lies inside it), else None."""
         lo, hi = self.declared
         return f"inside its declared range [{lo:.4g}, {hi:.4g}]" if lo <= value <= hi else None
 
-    def further(self, stopped: str | None) -> BeyondRange | None:
-        """This parameter widened again at the end it was widened at, where its fit ``stopped`` there
-        (by as much as its range now is wide, inside the physical bounds); None where it stopped
-        elsewhere or there is no room left. How far the user's guess is off is the record's to say."""
-        if not self.side or stopped != self.side:
-            return None
-        return widened(self, self.side, self.physical, self.declared)
 
-
-def widened(fp: FreeParameter, side: str, bound: tuple[float, float],
-            declared_range: tuple[float, float] | None = None) -> BeyondRange | None:
+def widened(fp: FreeParameter, side: str, bound: tuple[float, float]) -> BeyondRange | None:
     """``fp`` with its ``side`` ('lower' or 'upper') end moved beyond it by as much as the range is
-    wide (by its ratio, on a log scale), inside the physical ``bound``; None where there is no room.
-    ``declared_range``: the range its user declared (default: ``fp``'s own)."""
+    wide (by its ratio, on a log scale), inside the physical ``bound``; None where there is no room."""
     lower, upper = fp.lower, fp.upper
     if side == "lower":
         lower = max(fp.lower * fp.lower / fp.upper if fp.log else fp.lower - (fp.upper - fp.lower), bound[0])
@@ -86,8 +72,7 @@ def widened(fp: FreeParameter, side: str, bound: tuple[float, float],
         upper = min(fp.upper * fp.upper / fp.lower if fp.log else fp.upper + (fp.upper - fp.lower), bound[1])
         if not upper > fp.upper:
             return None
-    out = BeyondRange(**{f.name: getattr(fp, f.name) for f in fields(FreeParameter)},
-                      declared=declared_range or (fp.lower, fp.upper), side=side, physical=tuple(bound))
+    out = BeyondRange(**{f.name: getattr(fp, f.name) for f in fields(FreeParameter)}, declared=(fp.lower, fp.upper))
     out.lower, out.upper = lower, upper
     out.log = out.lower > 0 and out.upper / out.lower > 3.0
     return out

@@ -84,7 +84,6 @@ EXPLAINED_SHARE = 0.85      # share of the baseline's chamber-pressure misfit a 
 EXCHANGE_RIVALS = 2         # runners-up of an effect's round refitted in its place once later effects are named
 EXCHANGE_POINTS = 0.5       # score points (or 3 x the rival's noise spread) a rival must win by to take the place
 OTHER_STARTS = 2            # first-round runners-up a forward path starts from when the greedy path misses the record
-MAX_WIDENINGS = 3           # times a parameter beyond its declared range is widened again where it stops at its new end
 
 NAMED = "discrepancy"
 NONE = "no_significant_discrepancy"
@@ -610,8 +609,7 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
     for more than a calibration. A stand-in beyond its declared range (``p.declared``: that range,
     beyond_range.BeyondRange) counts only with its value outside that range, and replaces the effect
     only where it explains the record by the threshold better; as well, the effect stays and keeps it
-    in ``as_well_beyond_range``. One that stops at the end it was widened at is widened again
-    (``p.further``, at most MAX_WIDENINGS times) and refitted: that end was a step, not a bound.
+    in ``as_well_beyond_range``.
 
     ``stand_ins(ev)`` -> the stand-ins of ``ev``'s effect (opaque, e.g. free parameters);
     ``refit_instead(model, ev, rest, p)`` -> (the model without ``ev`` with ``p`` freed and the rest
@@ -628,14 +626,6 @@ def stand_in(accepted: list[Evaluation], model, full: float, *, stand_ins: Calla
         for p in stand_ins(ev):
             rest = [e for e in accepted if e is not ev]
             alt, s, value, bound = refit_instead(model, ev, rest, p)
-            for _ in range(MAX_WIDENINGS):
-                wider = p.further(bound) if hasattr(p, "further") else None
-                if wider is None:
-                    break
-                log(f"stand-in: {p.key} stopped at {value:.4g}, the end it was widened to; freed to "
-                    f"[{wider.lower:.4g}, {wider.upper:.4g}]")
-                p = wider
-                alt, s, value, bound = refit_instead(model, ev, rest, p)
             loss = full - s if score_on is None or not math.isfinite(s) else score_on(model, ev) - score_on(alt, ev)
             declared = getattr(p, "declared", None)
             if bound is None and declared is not None:
