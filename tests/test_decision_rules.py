@@ -1320,7 +1320,7 @@ def test_unexplained_when_nothing_is_named_and_one_joint_is_short_of_its_own_cei
         named=False, channel_fits=channel_fits, channel_ceilings=ceilings, **kw)
     r = why(fits)
     assert r and "nothing in the bank explains" in r[0] and "on j2" in r[0] and "3.0 points below" in r[0]
-    assert dc.joint_shortfall(fits, ceilings) == ("j2", 3.0, 95.0, 98.0)
+    assert dc.furthest_below(dc.joint_scores(fits, ceilings)) == ("j2", 3.0, 95.0, 98.0)
     assert not dc.unexplained_reasons(score=96.5, ceiling=98.0, angle_fits={"j1": 99.0, "j2": 96.0},
                                       residual_fails=True, named=False)      # the mean alone: 1.5 under
     assert not why({"j1": fits["j1"], "j2": {"angle": 98.0, "velocity": 96.0}})   # 1 under: within it

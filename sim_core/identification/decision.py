@@ -76,6 +76,7 @@ MAX_EFFECTS = 3             # effects named per diagnosed joint (selection.effec
 MAX_PAIRS = 15              # joint fits of two candidates tried when no single one passes
 FAR_POINTS = 10.0           # a model this far (score points) below its noise ceiling misses the record ...
 FAR_NOISE = 2.0             # ... when its misfit beyond the noise is also this many times the noise (RMS)
+FAR_MARK = f"more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises"   # the mark, as the reasons say it
 WORTH_NOISE = 1.0           # a misfit (beyond the noise, RMS) under this many noises is not worth naming
 WHITE_MISS_CHANNELS = ("velocity",)   # far off with a white residual: a disturbance on the measured position
 DRIFT_LOSS_POINTS = 0.5     # mean loss of the local channels that marks a stand-in for the replay's drift
@@ -856,7 +857,7 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     gap = ceiling - score
     if far(score, ceiling) and residual_fails:
         text = (f"the model's score {score:.1f} is {gap:.1f} points below its noise ceiling {ceiling:.1f} ("
-                f"{_noises(score, ceiling)}; {_FAR_MARK}) and its residual tests fail")
+                f"{_noises(score, ceiling)}; {FAR_MARK}) and its residual tests fail")
         if base_score is not None and base_score < score and ceiling > base_score:
             text += (f"; the effects it adds close {100 * (score - base_score) / (ceiling - base_score):.0f} % of the "
                      f"baseline's distance")
@@ -864,16 +865,16 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
     elif residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings)
         if off:
-            why.append("the model's " + _far_text(off) + f" ({_FAR_MARK}) and its residual tests fail")
+            why.append("the model's " + _far_text(off) + f" ({FAR_MARK}) and its residual tests fail")
     elif disturbance and not residual_fails and channel_fits and channel_ceilings:
         off = far_channels(channel_fits, channel_ceilings, WHITE_MISS_CHANNELS)
         if off:
-            why.append("the model's " + _far_text(off) + f" ({_FAR_MARK}) while its residual tests "
+            why.append("the model's " + _far_text(off) + f" ({FAR_MARK}) while its residual tests "
                        "pass: a misfit that large, white and uncorrelated with the command is no motion of the "
                        "joint the model leaves out, but something on the measured position")
     scores = joint_scores(channel_fits, channel_ceilings) if channel_fits and channel_ceilings else {}
     by_joint = bool(scores)
-    short = _furthest({j: fc for j, fc in (scores or {"": (score, ceiling)}).items() if worth_naming(*fc)})
+    short = furthest_below({j: fc for j, fc in (scores or {"": (score, ceiling)}).items() if worth_naming(*fc)})
     if not why and named is False and residual_fails and short:
         where = (f"on {short[0]} the model's score {short[2]:.1f} is {short[1]:.1f} points below its noise ceiling "
                  f"{short[3]:.1f}" if by_joint and len(channel_fits) > 1 else
@@ -901,7 +902,9 @@ def unexplained_reasons(*, score: float, ceiling: float, angle_fits: dict[str, f
 def joint_scores(channel_fits: dict[str, dict[str, float]],
                  channel_ceilings: dict[str, dict[str, float]]) -> dict[str, tuple[float, float]]:
     """joint -> (score, ceiling) of each joint whose channels have ceilings: the mean of its channel
-    fits against the mean of those channels' ceilings."""
+    fits against the mean of those channels' ceilings. A misfit on one of ten joints moves their mean
+    by a tenth, so the record is judged joint by joint; on one joint this is the record's score
+    against its ceiling."""
     out = {}
     for j, fits in channel_fits.items():
         chans = [c for c in fits if c in channel_ceilings.get(j, {})]
@@ -910,16 +913,7 @@ def joint_scores(channel_fits: dict[str, dict[str, float]],
     return out
 
 
-def joint_shortfall(channel_fits: dict[str, dict[str, float]],
-                    channel_ceilings: dict[str, dict[str, float]]) -> tuple[str, float, float, float] | None:
-    """(joint, points, score, ceiling) of the joint furthest below its own noise ceiling
-    (:func:`joint_scores`). A misfit on one of ten joints moves their mean by a tenth, so the record
-    is judged joint by joint; on one joint this is the record's score against its ceiling. None
-    without a joint whose channels have ceilings."""
-    return _furthest(joint_scores(channel_fits, channel_ceilings))
-
-
-def _furthest(scores: dict[str, tuple[float, float]]) -> tuple[str, float, float, float] | None:
+def furthest_below(scores: dict[str, tuple[float, float]]) -> tuple[str, float, float, float] | None:
     """(joint, points, score, ceiling) of the joint of ``scores`` furthest below its ceiling (one whose
     gap is not a number first); None for none."""
     best = None
@@ -979,9 +973,6 @@ def far_channels(channel_fits: dict[str, dict[str, float]], channel_ceilings: di
 def _far_text(off: list[tuple[str, str, float, float]]) -> str:
     return "; ".join(f"{ch} fit on {j} {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f}, "
                      f"{_noises(f, c)}" for j, ch, f, c in off)
-
-
-_FAR_MARK = f"more than {FAR_POINTS:g} points and {FAR_NOISE:g} noises"
 
 
 def _noises(fit: float, ceiling: float) -> str:

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from .decision import FAR_NOISE, FAR_POINTS, WHITE_MISS_CHANNELS, far_channels, misfit_in_noise
+from .decision import FAR_MARK, WHITE_MISS_CHANNELS, far_channels, misfit_in_noise
 
 WHITE_RHO = 0.3   # largest |autocorrelation| (lags 1-20, decimated) of a velocity residual that counts as white
 
@@ -52,10 +52,9 @@ def cause(joint: str, finding: dict) -> str:
     """The record cause for one joint of :func:`found`."""
     chans = ", ".join(f"{ch} fit {f:.1f} is {c - f:.1f} points below its noise ceiling {c:.1f} (a misfit of "
                       f"{misfit_in_noise(f, c):.1f} noises)" for ch, f, c in finding["channels"])
-    return (f"the position of {joint} carries a disturbance no motion of the joint makes: its {chans} (more than "
-            f"{FAR_POINTS:g} points and {FAR_NOISE:g} noises), and the velocity residual is white (no "
-            "autocorrelation beyond "
-            f"{finding['largest_autocorrelation']:.2f}) where a misfit of the motion, driven through the joint's "
+    return (f"the position of {joint} carries a disturbance no motion of the joint makes: its {chans} ({FAR_MARK}), "
+            f"and the velocity residual is white (no autocorrelation beyond {finding['largest_autocorrelation']:.2f}) "
+            "where a misfit of the motion, driven through the joint's "
             "inertia, is coloured. Interference on the sensor's wiring aliased by the logger (mains hum sampled near "
             "50 Hz), a worn or dirty potentiometer track or a loose connector do this. Shield the sensor's cable or "
             "filter it before the logger (an anti-alias filter below half the log's rate) and record again; the "
