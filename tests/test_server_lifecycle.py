@@ -82,7 +82,9 @@ def test_schemathesis_finds_no_server_errors(tmp_path):
             capture_output=True, text=True, timeout=600, cwd=tmp_path)
         assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
         with s.client() as c:
-            assert c.get("/api/v1/health").json()["engine_alive"]   # still alive after the fuzzing
+            h = c.get("/api/v1/health").json()
+            assert h["engine_alive"], (h, s.log_text()[-3000:])   # still alive after the fuzzing
+            assert h["engine"]["restarts"] == 0, h["engine"]           # and never killed during it
     finally:
         s.stop()
 

@@ -267,6 +267,7 @@ class EngineClient:
         self._lock = threading.Lock()
         self._next_id = 0
         self.dropped_replies = 0
+        self.in_flight: tuple[str, float] | None = None   # (op, monotonic s sent): a stall's likely cause
         self.process = ctx.Process(target=engine_main, args=(pickle.dumps(spec), cfg, block.name, layout, child,
                                                              child_events, os.getpid()),
                                    name="hydrohil-engine", daemon=True)
@@ -290,19 +291,23 @@ class EngineClient:
             except (OSError, ValueError) as exc:
                 raise EngineDown(f"engine control channel closed ({exc})") from None
             A.fetch_add(self.block.sync, S.W_CTL, 1)   # tells the realtime loop to look at the pipe
-            end = time.monotonic() + timeout
-            while True:
-                left = end - time.monotonic()
-                if left <= 0 or not self._conn.poll(left):
-                    raise TimeoutError(f"engine did not answer {op!r} within {timeout:g} s")
-                try:
-                    msg = self._conn.recv()
-                except (EOFError, OSError):
-                    raise EngineDown(f"engine process ended while answering {op!r}") from None
-                if isinstance(msg, tuple) and len(msg) == 3 and msg[0] == rid:
-                    _, kind, payload = msg
-                    break
-                self.dropped_replies += 1
+            self.in_flight = (op, time.monotonic())
+            try:
+                end = time.monotonic() + timeout
+                while True:
+                    left = end - time.monotonic()
+                    if left <= 0 or not self._conn.poll(left):
+                        raise TimeoutError(f"engine did not answer {op!r} within {timeout:g} s")
+                    try:
+                        msg = self._conn.recv()
+                    except (EOFError, OSError):
+                        raise EngineDown(f"engine process ended while answering {op!r}") from None
+                    if isinstance(msg, tuple) and len(msg) == 3 and msg[0] == rid:
+                        _, kind, payload = msg
+                        break
+                    self.dropped_replies += 1
+            finally:
+                self.in_flight = None
         if kind == "error":
             raise EngineError(payload)
         return payload

@@ -4,7 +4,8 @@ restart it by policy.
 A thread of its own waits on the engine's process sentinel and its event pipe every few
 milliseconds and checks that the loop's heartbeat word advances (the loop bumps it every tick, and
 at least every 10 ms when paused or in lockstep). Death (exit, signal) or a stall longer than
-``stall_s`` marks the engine down with the reason, kills a stalled one, and calls the ``on_down``
+``stall_s`` (time without a heartbeat, less any wait of a runnable engine for a CPU:
+:mod:`.stall_clock`) marks the engine down with the reason, kills a stalled one, and calls the ``on_down``
 listeners at once (CAN: feedback stops, NMT stopped, EMCY; recordings closed; commands refused).
 Policy ``auto`` restarts it from the initial state with every valve neutral, with a growing delay
 and at most ``max_per_min`` restarts a minute (then it stays down, as ``never`` does at once), and
@@ -24,6 +25,7 @@ from multiprocessing.connection import wait
 
 from ..engine import shared as S
 from ..engine.process import EngineClient, EngineDown
+from .stall_clock import StallClock
 
 log = logging.getLogger("hydrohil.supervisor")
 
@@ -43,6 +45,15 @@ def describe_exit(code: int | None) -> str:
             name = f"signal {-code}"
         return f"killed by {name}"
     return f"exited with status {code}"
+
+
+def _doing(eng, block, now: float) -> str:
+    """What the engine was asked to do when it stalled: its mode and the request it was answering."""
+    text = f", mode {S.MODES[int(block.state[S.S_MODE])]}"
+    flight = eng.in_flight
+    if flight is not None:
+        text += f", answering {flight[0]!r} sent {1e3 * (now - flight[1]):.0f} ms before"
+    return text
 
 
 class EngineSupervisor:
@@ -129,7 +140,7 @@ class EngineSupervisor:
 
     # ---- the watcher ----------------------------------------------------------------------------------
     def _watch(self) -> None:
-        last_beat, last_change = -1, time.monotonic()
+        stall = StallClock()
         while not self._stop.is_set():
             eng = self.engine
             if self.state == RESTARTING and self._restart_at is not None and time.monotonic() >= self._restart_at:
@@ -149,15 +160,13 @@ class EngineSupervisor:
             now = time.monotonic()
             if not eng.process.is_alive():
                 self._fail(eng, "died", f"engine process {describe_exit(eng.process.exitcode)}")
-                last_beat = -1
+                stall.reset()
                 continue
-            beat = self.block.beat()
-            if beat != last_beat:
-                last_beat, last_change = beat, now
-            elif now - last_change > self.stall_s:
-                self._fail(eng, "stalled", f"engine loop made no progress for {1e3 * (now - last_change):.0f} ms "
-                                           f"(limit {1e3 * self.stall_s:.0f} ms); killed")
-                last_beat = -1
+            idle = stall.no_progress_s(self.block.beat(), now, eng.pid)
+            if idle > self.stall_s:
+                self._fail(eng, "stalled", f"engine loop made no progress for {1e3 * idle:.0f} ms "
+                                           f"(limit {1e3 * self.stall_s:.0f} ms{_doing(eng, self.block, now)}); killed")
+                stall.reset()
 
     def _drain_events(self, eng) -> None:
         try:
