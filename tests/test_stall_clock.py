@@ -27,15 +27,15 @@ class ScriptedProbe:
 
 
 def clock_with(probe):
-    return StallClock(probe_for=lambda pid: probe)
+    return StallClock(0.005, probe_for=lambda pid: probe)
 
 
-def polls(clock, probe, beat, t0, n, dt=0.005, cpu_per_poll=0.0, state="R"):
+def polls(clock, probe, beat, t0, n, dt=0.005, cpu_per_poll=0.0, state="R", wake=None):
     out = 0.0
     probe.st = state
     for k in range(1, n + 1):
         probe.cpu += cpu_per_poll
-        out = clock.no_progress_s(beat, t0 + k * dt, 1)
+        out = clock.no_progress_s(beat, t0 + k * dt, 1, wake)
     return out
 
 
@@ -62,6 +62,23 @@ def test_a_runnable_engine_hung_on_a_cpu_counts_the_cpu_it_got():
     assert polls(c, probe, 7, 0.0, 40, cpu_per_poll=0.005) == pytest.approx(0.2)      # all of it
     c.no_progress_s(8, 0.3, 1)
     assert polls(c, probe, 8, 0.3, 40, cpu_per_poll=0.0025) == pytest.approx(0.1)     # half a CPU: half
+
+
+def test_an_engine_asleep_in_its_own_timed_wait_counts_only_until_it_asked_to_wake():
+    probe = ScriptedProbe(1)
+    c = clock_with(probe)
+    c.no_progress_s(7, 0.0, 1, 0.01)
+    assert polls(c, probe, 7, 0.0, 40, state="S", wake=0.01) == pytest.approx(0.01)   # woken 190 ms late
+    c.no_progress_s(8, 1.0, 1)
+    assert polls(c, probe, 8, 1.0, 40, state="S") == pytest.approx(0.2)    # asleep where it said no wait
+
+
+def test_a_span_the_watcher_itself_did_not_see_counts_as_one_poll():
+    probe = ScriptedProbe(1)
+    c = clock_with(probe)
+    c.no_progress_s(7, 0.0, 1)
+    assert polls(c, probe, 7, 0.0, 1, dt=0.5, state="T") == pytest.approx(0.005)     # held off 500 ms
+    assert polls(c, probe, 7, 0.5, 20, state="T") == pytest.approx(0.105)            # then seen: counts
 
 
 def test_progress_starts_the_count_afresh_and_an_unreadable_probe_counts_wall_time():
@@ -91,7 +108,7 @@ def test_a_real_process_held_off_the_cpu_is_told_from_a_stopped_one():
         time.sleep(0.2)
         probe = ProcessProbe(procs[0].pid)
         assert probe.state() == "R" and probe.cpu_s() is not None
-        c = StallClock()
+        c = StallClock(0.005)
         t0 = time.monotonic()
         c.no_progress_s(1, t0, procs[0].pid)
         while time.monotonic() - t0 < 1.0:

@@ -94,6 +94,7 @@ class EngineLoop:
         A.read_consistent(scratch_sync, S.W_CMD_SEQ, self.block.cmd_flat, self._cmd_flat, 1)
         A.load_relaxed(scratch_sync, S.W_CTL)
         A.fetch_add(scratch_sync, S.W_BEAT, 1)
+        A.store_release(scratch_sync, S.W_WAKE, 0)
         apply_commands(self._cmd, self._u.copy(), self._wd.copy(), self._wd_trips.copy(), 0.0, True, 0.0, 0.0,
                        self.watchdog_s)
 
@@ -186,7 +187,9 @@ class EngineLoop:
         clock = self.clock
         deadline = clock.now() + dt
         while self.mode == "realtime" and not self.stop:
+            self._declare_wait(deadline - clock.now())
             clock.wait_until(deadline)
+            self._declare_wait(None)
             lateness = clock.now() - deadline
             self.tick()
             self._account(lateness)
@@ -200,8 +203,20 @@ class EngineLoop:
                 while self.conn.poll():
                     self._poll(0.0)
 
+    def _declare_wait(self, seconds: float | None) -> None:
+        """Say in the shared block until when the loop waits of its own accord (None: it stopped
+        waiting), so that a wake-up the OS delivers late is not taken for a stall."""
+        wake = 0 if seconds is None else time.monotonic_ns() + max(int(seconds * 1e9), 0) + 1
+        A.store_release(self.block.sync, S.W_WAKE, wake)
+
     def _poll(self, timeout: float) -> None:
-        if self.conn.poll(timeout):
+        if timeout > 0.0:
+            self._declare_wait(timeout)
+            ready = self.conn.poll(timeout)
+            self._declare_wait(None)
+        else:
+            ready = self.conn.poll(0.0)
+        if ready:
             try:
                 msg = self.conn.recv()
             except (EOFError, OSError):

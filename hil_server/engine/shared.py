@@ -24,7 +24,9 @@ import numpy as np
 from . import atomics as A
 
 # synchronisation words (int64)
-W_CMD_SEQ, W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT, W_N = range(6)
+# W_WAKE: the CLOCK_MONOTONIC ns at which the loop's own timed wait ends, 0 outside one (the
+# supervisor does not blame the loop for a wake-up the OS delivers late)
+W_CMD_SEQ, W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT, W_WAKE, W_N = range(7)
 SYNC_WORDS = 8   # padded to one cache line
 
 # command columns
@@ -161,13 +163,18 @@ class SharedBlock:
     def beat(self) -> int:
         return int(A.load_relaxed(self.sync, W_BEAT))
 
+    def wake_s(self) -> float | None:
+        """Monotonic seconds at which the loop's current timed wait ends; None outside one."""
+        ns = int(A.load_relaxed(self.sync, W_WAKE))
+        return ns * 1e-9 if ns else None
+
     def prefault(self) -> None:
         """Touch every page of the block (read), so that none faults in later."""
         float(self._buf[::512].sum())
 
     def reset_for_engine(self) -> None:
         """Before a (re)started engine attaches: no writer is mid-update, nothing is alive yet."""
-        for w in (W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT):
+        for w in (W_STATE_SEQ, W_REC_ROWS, W_CTL, W_BEAT, W_WAKE):
             A.store_release(self.sync, w, 0)
         self.state[S_ALIVE] = 0.0
         self.state[S_DIVERGED] = 0.0

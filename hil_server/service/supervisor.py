@@ -140,7 +140,7 @@ class EngineSupervisor:
 
     # ---- the watcher ----------------------------------------------------------------------------------
     def _watch(self) -> None:
-        stall = StallClock()
+        stall = StallClock(POLL_S)
         while not self._stop.is_set():
             eng = self.engine
             if self.state == RESTARTING and self._restart_at is not None and time.monotonic() >= self._restart_at:
@@ -162,7 +162,7 @@ class EngineSupervisor:
                 self._fail(eng, "died", f"engine process {describe_exit(eng.process.exitcode)}")
                 stall.reset()
                 continue
-            idle = stall.no_progress_s(self.block.beat(), now, eng.pid)
+            idle = stall.no_progress_s(self.block.beat(), now, eng.pid, self.block.wake_s())
             if idle > self.stall_s:
                 self._fail(eng, "stalled", f"engine loop made no progress for {1e3 * idle:.0f} ms "
                                            f"(limit {1e3 * self.stall_s:.0f} ms{_doing(eng, self.block, now)}); killed")
