@@ -5,10 +5,11 @@ A thread of its own waits on the engine's process sentinel and its event pipe ev
 milliseconds and checks that the loop's heartbeat word advances (the loop bumps it every tick, and
 at least every 10 ms when paused or in lockstep). Death (exit, signal) or a stall longer than
 ``stall_s`` (time without a heartbeat by the loop's own fault, not the OS's: :mod:`.stall_clock`)
-marks the engine down with the reason, kills a stalled one, and calls the ``on_down`` listeners at once (CAN: feedback stops, NMT stopped, EMCY; recordings closed; commands refused).
-Policy ``auto`` restarts it from the initial state with every valve neutral, with a growing delay
-and at most ``max_per_min`` restarts a minute (then it stays down, as ``never`` does at once), and
-calls ``on_up``. VeriStand and Speedgoat stop the real-time target on such faults; an emulator
+marks the engine down with the reason, kills a stalled one, and calls the ``on_down`` listeners
+at once (CAN: feedback stops, NMT stopped, EMCY; recordings closed; commands refused). Policy
+``auto`` restarts it from the initial state with every valve neutral, with a growing delay and at
+most ``max_per_min`` restarts a minute (then it stays down, as ``never`` does at once), and calls
+``on_up``. VeriStand and Speedgoat stop the real-time target on such faults; an emulator
 may come back, but only loudly.
 """
 
