@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from viser import GuiEvent
 from web_helpers import (CHROMIUM, CHROMIUM_ARGS, LAUNCH_TIMEOUT_MS, InProcessServer, artifacts_dir, changed,
-                         dismiss_notifications, open_page, project, region_mask, require_chromium, settled_screenshot, wait_for)
+                         dismiss_notifications, open_page, project, region_mask, require_chromium, screenshot,
+                         settled_screenshot, wait_changed, wait_for)
 
 from web.panel import HOLD_OFF_S
 
@@ -76,6 +77,18 @@ class Monitor:
         self.panel.show_links.value = on      # the panel's own "Display" checkboxes
         self.panel.show_actuators.value = on
 
+    def toggled_shot(self, name: str, on: bool, before: np.ndarray, wait_s: float) -> np.ndarray:
+        """Show or hide the arm, then a settled screenshot once the page drew it: the page's own checkbox
+        took the value (the scene's change comes in the same message stream) and the canvas differs from
+        ``before`` (or ``wait_s`` passed: nothing there to change). Without the wait, a page still drawing
+        the old frame looks "settled" and both pictures show the same scene."""
+        self.show(on)
+        for h in (self.panel.show_links, self.panel.show_actuators):
+            box = self.page.locator(f'[id="{h._impl.uuid}"]')  # viser gives an input its element's id
+            wait_for(lambda: box.is_checked() == on, 15, f"the page's checkbox to read {on}")
+        wait_changed(self.page, self.dir / f"{self.robot}_{name}.png", before, self.canvas, wait_s)
+        return self.shot(name)
+
     def close(self):
         try:
             self.page.close()
@@ -91,18 +104,18 @@ def hydrolek(browser, tmp_path_factory):
 
 
 def assert_arm_drawn(m: Monitor) -> None:
-    full = m.shot("arm")
+    # hidden first: an arm whose meshes are still loading looks like a hidden one, so the arm is judged
+    # by what appears when it is shown (given up to 60 s: software WebGL parses meshes slowly)
+    empty = m.toggled_shot("empty_scene", False, screenshot(m.page, m.dir / f"{m.robot}_initial.png"), 5.0)
+    full = m.toggled_shot("arm", True, empty, 60.0)
     region = m.arm_region() & m.canvas
-    m.show(False)
-    try:
-        empty = m.shot("empty_scene")
-    finally:
-        m.show(True)
-    again = m.shot("arm_again")
+    hidden = m.toggled_shot("hidden_again", False, full, 30.0)
+    again = m.toggled_shot("arm_again", True, hidden, 30.0)
     d = changed(full, empty)
     inside = d[region].mean()
     outside = d[m.canvas & ~region].mean()
-    assert inside > 0.05, f"{m.robot}: only {inside:.1%} of the arm's region differs from the empty scene"
+    assert inside > 0.05, (f"{m.robot}: only {inside:.1%} of the arm's region differs from the empty scene "
+                           f"({outside:.2%} outside it)")
     assert outside < 0.005, f"{m.robot}: {outside:.2%} of the canvas outside the arm's region changed"
     # shown again: the arm is back where it was. Not pixel-identical: the plant runs in real time (the
     # harvester's boom settles ~0.3 mrad over these seconds) and edges re-rasterise, so the test is
@@ -124,8 +137,10 @@ def assert_arm_moves(m: Monitor, joint: str, volts: float, seconds: float) -> fl
         c.put("/api/v1/commands", json={"voltages": {joint: 0.0}}).raise_for_status()
     wait_for(lambda: abs(m.server.svc.documents.state()["joints"][joint]["velocity"]) < 0.01, 10, f"{joint} to stop")
     q1 = m.server.svc.documents.state()["pose"][dof]
-    after = m.shot("after_command")
     region = (region | m.arm_region()) & m.canvas
+    # the plant stopped; the page may still be drawing an older pose (software WebGL): wait for it
+    wait_changed(m.page, m.dir / f"{m.robot}_after_command.png", before, region, 15.0)
+    after = m.shot("after_command")
     moved = changed(before, after)[region].mean()
     assert abs(q1 - q0) > 0.15, f"{joint} moved only {q1 - q0:.3f} rad"
     assert moved > 0.03, f"{m.robot}: commanding {joint} changed only {moved:.1%} of the arm's region"

@@ -286,6 +286,17 @@ def settled_screenshot(page, path: Path, mask: np.ndarray, *, timeout: float = 6
         prev = cur
 
 
+def wait_changed(page, path: Path, before: np.ndarray, mask: np.ndarray, wait_s: float, tol: float = 0.002) -> bool:
+    """Whether the masked part of the page came to differ from ``before`` within ``wait_s`` seconds."""
+    end = time.monotonic() + wait_s
+    while True:
+        if changed(before, screenshot(page, path))[mask].mean() >= tol:
+            return True
+        if time.monotonic() > end:
+            return False
+        page.wait_for_timeout(300)
+
+
 def dismiss_notifications(page, wait_ms: int = 10000) -> None:
     """Close viser's toasts (e.g. 'Software WebGL rendering detected', which comes a few seconds after
     the page) so they do not cover the scene in screenshots."""
