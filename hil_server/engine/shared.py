@@ -163,6 +163,10 @@ class SharedBlock:
     def beat(self) -> int:
         return int(A.load_relaxed(self.sync, W_BEAT))
 
+    def mode(self) -> str:
+        """The engine's current mode name (one of ``MODES``)."""
+        return MODES[int(self.state[S_MODE])]
+
     def wake_s(self) -> float | None:
         """Monotonic seconds at which the loop's current timed wait ends; None outside one."""
         ns = int(A.load_relaxed(self.sync, W_WAKE))

@@ -18,7 +18,7 @@ class PlantControl:
 
     @property
     def mode(self) -> str:
-        return S.MODES[int(self.block.state[S.S_MODE])]
+        return self.block.mode()
 
     def set_mode(self, mode: str) -> dict:
         if mode not in S.MODES:

@@ -95,12 +95,13 @@ class StallClock:
         if last is None:
             return self._counted
         dt = now - last[0]
-        state = self._probe.state()
         if dt > LATE_POLLS * self.poll_s:
             dt = self.poll_s                           # the watcher did not see this span
-        elif state == "R" and cpu is not None and last[1] is not None:
-            dt = min(dt, max(cpu - last[1], 0.0))      # runnable: only the CPU it got counts
-        elif state == "S" and wake is not None:
-            dt = min(dt, max(wake - last[0], 0.0))     # in its own timed wait: only until it asked to wake
+        else:
+            state = self._probe.state()
+            if state == "R" and cpu is not None and last[1] is not None:
+                dt = min(dt, max(cpu - last[1], 0.0))  # runnable: only the CPU it got counts
+            elif state == "S" and wake is not None:
+                dt = min(dt, max(wake - last[0], 0.0))  # in its own timed wait: only until it asked to wake
         self._counted += dt
         return self._counted

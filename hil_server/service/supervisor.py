@@ -23,7 +23,6 @@ from collections import deque
 from dataclasses import replace
 from multiprocessing.connection import wait
 
-from ..engine import shared as S
 from ..engine.process import EngineClient, EngineDown
 from .stall_clock import StallClock
 
@@ -49,7 +48,7 @@ def describe_exit(code: int | None) -> str:
 
 def _doing(eng, block, now: float) -> str:
     """What the engine was asked to do when it stalled: its mode and the request it was answering."""
-    text = f", mode {S.MODES[int(block.state[S.S_MODE])]}"
+    text = f", mode {block.mode()}"
     flight = eng.in_flight
     if flight is not None:
         text += f", answering {flight[0]!r} sent {1e3 * (now - flight[1]):.0f} ms before"
@@ -188,7 +187,7 @@ class EngineSupervisor:
             self.kind, self.reason = kind, reason
             self.down_since = time.monotonic()
             self.failures[kind] = self.failures.get(kind, 0) + 1
-        last_mode = S.MODES[int(self.block.state[S.S_MODE])]
+        last_mode = self.block.mode()
         eng.kill()
         log.error("%s", self.down_message())
         for cb in list(self.on_down):
