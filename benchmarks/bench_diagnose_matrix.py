@@ -12,7 +12,8 @@ diagnosed with the real commands.
   magnitude of seed k of N is drawn from the k-th of N strata of the effect's range (``RANGES``, in
   the actuator's own scales; a flow limit's share (the valve's or the pump's) on HydroLek is taken of
   the largest flow its open-loop record demands, 0.38-0.50 of the valve's full flow at the matrix's
-  seeds: ``DEMAND_SCALED``), so the seeds cover the range, not its middle; HydroLek's excitation
+  seeds: ``DEMAND_SCALED``; on a rig, a parameter its spec declares estimated, the load, across
+  that declared range: ``within_declared``), so the seeds cover the range, not its middle; HydroLek's excitation
   cycles through PRBS (``hydrohil excite``), a multisine and operator-like doublets with holds; the
   rig's is closed-loop steps; the nominal model is off a few percent (valve flow, spool bandwidth,
   seal friction) and the angle noise is drawn in 0.2-1 mrad;
@@ -80,7 +81,7 @@ from sim_core.effects import EFFECTS  # noqa: E402
 from sim_core.identification import conditional  # noqa: E402
 from sim_core.identification.candidates import actuator_scales, bank  # noqa: E402
 from sim_core.identification.metrics import noise_std  # noqa: E402
-from sim_core.model.spec import load_robot  # noqa: E402
+from sim_core.model.spec import estimable, load_robot  # noqa: E402
 from sim_core.rigs.knobs import TEMPLATE_KNOBS  # noqa: E402
 
 GOALS = {"singles_right_pct": (">=", 95.0), "pairs_right_pct": (">=", 80.0), "clean_false_alarm_pct": ("<=", 0.0),
@@ -136,9 +137,13 @@ def subtree_link_mass(spec, joint) -> float:
 
 
 def magnitude(effect: str, spec, joint: str | None, k: int, n: int, rng) -> dict:
-    """The hidden effect's parameters for seed k of n (stratum k of the effect's range)."""
+    """The hidden effect's parameters for seed k of n (stratum k of the effect's range; on a rig that
+    declares the parameter estimated, of that declared range: :func:`within_declared`)."""
     pname, lo, hi, scale, log, two_sided = RANGES[effect]
     u = (k + rng.uniform()) / n
+    key = f"effects.{effect}.{joint}.{pname}"
+    if joint and key in spec.estimated:
+        return {pname: within_declared(spec, key, u, rng)}
     v = float(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))) if log else lo + u * (hi - lo)
     sc = actuator_scales(spec, joint) if joint else {}
     if scale == "leak":
@@ -157,6 +162,18 @@ def magnitude(effect: str, spec, joint: str | None, k: int, n: int, rng) -> dict
     if effect == "leakage":
         out["external"] = 0.0
     return out
+
+
+def within_declared(spec, key: str, u: float, rng, gap: float = 0.15) -> float:
+    """A truth for a parameter the rig declares estimated (its load): stratum ``u`` of the declared
+    range on one side of the spec's value, at least ``gap`` (relative) from it. The spec says what the
+    rig may carry; a value beyond that is a different question (the report's ``as_well_beyond_range``)."""
+    lo, hi = spec.estimated[key]
+    _, nominal = estimable(spec, key)
+    below, above = (lo, nominal * (1.0 - gap)), (nominal * (1.0 + gap), hi)
+    sides = [s for s in (below, above) if s[0] < s[1]]
+    a, b = sides[int(rng.integers(len(sides)))]
+    return float(a + u * (b - a)) if (a, b) == above else float(b - u * (b - a))
 
 
 def excitation(kind: str, seconds: float, rate: float, rng) -> np.ndarray:
