@@ -31,6 +31,24 @@ def test_an_end_moves_out_by_the_ranges_width_inside_the_physical_bounds():
     assert widened(log, "lower", (0.0, 1e9)).lower == pytest.approx(1e5)
 
 
+def test_a_load_may_be_set_down_whatever_its_declared_range():
+    cyl = FreeParameter("m", 50.0, 205.0, log=True)       # the cylinder template's 100 kg: [50, 205]
+    assert widened(cyl, "lower", (-1000.0, 5000.0)).lower == pytest.approx(50.0 * 50.0 / 205.0)   # by its ratio
+    w = widened(cyl, "lower", (-1000.0, 5000.0), absent=0.0)
+    assert w.lower == 0.0 and not w.log                   # on to none: a load set down
+    assert widened(cyl, "upper", (-1000.0, 5000.0), absent=0.0).upper == pytest.approx(205.0 * 205.0 / 50.0)
+    lin = FreeParameter("p", 20.0, 85.0)
+    assert widened(lin, "lower", (-1000.0, 5000.0), absent=0.0).lower == pytest.approx(-45.0)  # already past it
+    # the effect owns it: the payload's mass may be absent, a supply may not
+    spec = load_robot("hydrolek")
+    free = [FreeParameter("effects.payload.j2.mass", 50.0, 205.0, log=True),
+            FreeParameter("supply.pressure", 9.8e6, 16.1e6, log=True)]
+    rows = [{"parameter": fp.key, "fitted": fp.lower, "identified": False} for fp in free]
+    load, supply = stopped_at_an_end(spec, rows, free, {fp.key for fp in free})
+    assert load.lower == 0.0
+    assert supply.lower == pytest.approx(9.8e6 * 9.8e6 / 16.1e6)
+
+
 def test_only_estimated_parameters_stopped_at_an_end_stand_in_the_load_first():
     spec = load_robot("hydrolek")
     free = [FreeParameter("supply.pressure", 9.8e6, 16.1e6), FreeParameter("effects.payload.j2.mass", 20.0, 85.0),

@@ -28,6 +28,9 @@ class Parameter:
     kind: str = "float"            # float | vec3 | vec | choice | str
     choices: tuple[str, ...] = ()
     length: int = 0                # for kind == "vec": required length (0 = any)
+    # the value at which what it measures is not there at all (a load set down: 0 kg), where that is an
+    # everyday state whatever a spec's range says; None where the thing cannot be absent (a supply)
+    absent: float | None = None
 
     def validate(self, value: Any, where: str) -> Any:
         """Return ``value`` converted to its kind, or raise :class:`ParameterError` naming ``where``."""

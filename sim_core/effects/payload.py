@@ -15,7 +15,8 @@ class Payload(Effect):
 
     name = "payload"
     citation = CITE_CATALOG + " (§3.15)"
-    PARAMETERS = (Parameter("mass", "kg", "point mass added at the payload point", 5.0, -1000.0, 5000.0),)
+    PARAMETERS = (Parameter("mass", "kg", "point mass added at the payload point", 5.0, -1000.0, 5000.0,
+                            absent=0.0),)   # a load set down
     switch = False          # changes the link's mass at lowering; no equations of its own
     MECHANISM = True        # lowered before the inertia-dependent parts (end stops, compliance)
 

@@ -7,7 +7,9 @@ pushing it there). But the range is the user's guess too: a 10 kg load on a rig 
 moves it as no effect of the bank does, and a candidate that makes up some of it (a 1 % valve
 asymmetry for the load's pull) was named without a word about the load. So such a parameter is a stand-in for
 every named effect (decision.stand_in), freed beyond the end it stopped at by as much as its range
-is wide (inside the parameter's physical bounds), in the effect's place. Where it explains the
+is wide, and on to where what it measures is absent where its effect declares that an everyday
+state (``Parameter.absent``: a load set down, far below any range declared for it), inside the
+parameter's physical bounds, in the effect's place. Where it explains the
 record by the threshold better than the effect (with its value outside the declared range, not
 inside), the effect was standing in for it: a calibration finding, the range the one to correct.
 Where as well (the load's pull and a valve asymmetry set the same up/down speeds on a record
@@ -38,7 +40,7 @@ def stopped_at_an_end(spec, changes: list[dict], free: list[FreeParameter], nuis
         side = at_bound(fp, row["fitted"])
         if side is not None:
             p = declared(spec, fp.key)
-            wide = widened(fp, side, (p.lower, p.upper))
+            wide = widened(fp, side, (p.lower, p.upper), p.absent)
             if wide is not None:
                 out.append(wide)
     # tried in the calibration's own order of what a rig's user least knows (calibration.KEEP_ORDER:
@@ -60,16 +62,24 @@ class BeyondRange(FreeParameter):
         return f"inside its declared range [{lo:.4g}, {hi:.4g}]" if lo <= value <= hi else None
 
 
-def widened(fp: FreeParameter, side: str, bound: tuple[float, float]) -> BeyondRange | None:
+def widened(fp: FreeParameter, side: str, bound: tuple[float, float], absent: float | None = None) -> BeyondRange | None:
     """``fp`` with its ``side`` ('lower' or 'upper') end moved beyond it by as much as the range is
-    wide (by its ratio, on a log scale), inside the physical ``bound``; None where there is no room."""
+    wide (by its ratio, on a log scale), and on to ``absent`` (the value where what it measures is not
+    there: a load set down) where that lies farther on that side, inside the physical ``bound``; None
+    where there is no room."""
     lower, upper = fp.lower, fp.upper
     if side == "lower":
-        lower = max(fp.lower * fp.lower / fp.upper if fp.log else fp.lower - (fp.upper - fp.lower), bound[0])
+        lower = fp.lower * fp.lower / fp.upper if fp.log else fp.lower - (fp.upper - fp.lower)
+        if absent is not None:
+            lower = min(lower, absent)
+        lower = max(lower, bound[0])
         if not lower < fp.lower:
             return None
     else:
-        upper = min(fp.upper * fp.upper / fp.lower if fp.log else fp.upper + (fp.upper - fp.lower), bound[1])
+        upper = fp.upper * fp.upper / fp.lower if fp.log else fp.upper + (fp.upper - fp.lower)
+        if absent is not None:
+            upper = max(upper, absent)
+        upper = min(upper, bound[1])
         if not upper > fp.upper:
             return None
     out = BeyondRange(**{f.name: getattr(fp, f.name) for f in fields(FreeParameter)}, declared=(fp.lower, fp.upper))
