@@ -106,11 +106,14 @@ def hydrolek(browser, tmp_path_factory):
 def assert_arm_drawn(m: Monitor) -> None:
     # hidden first: an arm whose meshes are still loading looks like a hidden one, so the arm is judged
     # by what appears when it is shown (given up to 60 s: software WebGL parses meshes slowly)
-    empty = m.toggled_shot("empty_scene", False, screenshot(m.page, m.dir / f"{m.robot}_initial.png"), 5.0)
-    full = m.toggled_shot("arm", True, empty, 60.0)
-    region = m.arm_region() & m.canvas
-    hidden = m.toggled_shot("hidden_again", False, full, 30.0)
-    again = m.toggled_shot("arm_again", True, hidden, 30.0)
+    try:
+        empty = m.toggled_shot("empty_scene", False, screenshot(m.page, m.dir / f"{m.robot}_initial.png"), 5.0)
+        full = m.toggled_shot("arm", True, empty, 60.0)
+        region = m.arm_region() & m.canvas
+        hidden = m.toggled_shot("hidden_again", False, full, 30.0)
+        again = m.toggled_shot("arm_again", True, hidden, 30.0)
+    finally:
+        m.show(True)        # the module's later tests share the page: never leave the arm hidden
     d = changed(full, empty)
     inside = d[region].mean()
     outside = d[m.canvas & ~region].mean()
