@@ -1,6 +1,7 @@
 """A rig that changed while it was logged (sim_core/identification/parameter_drift.py): the rules on
 synthetic scores and calibration rows (no simulation), each with a case that fails when the rule is
-deleted or inverted, and end to end: a load picked up half way through a boom rig's closed-loop log
+deleted or inverted (the later part fitted once calibrated on it, the early part fitted by its own
+calibration, a parameter moved), and end to end: a load picked up half way through a boom rig's closed-loop log
 is unexplained, nothing named, with the load's change said as the record's cause. A misfit that is
 the same all through the record (tests/test_mains_tone.py's 10 Hz mode, tests/test_diagnose_
 unexplained.py's 8 Hz mode, whose record causes must stay empty) keeps no such cause."""
@@ -21,6 +22,14 @@ def test_closing_half_the_distance_to_the_ceiling_counts():
     assert pd.closes(90.0, 96.0, 97.0)                 # 6 of 7 points
     assert not pd.closes(90.0, 93.0, 97.0)             # 3 of 7: the later part is still missed
     assert not pd.closes(97.5, 98.0, 97.0)             # nothing to close: the first calibration fits it
+
+
+def test_a_misfit_the_early_part_shows_as_well_is_the_models_not_a_change():
+    # the first calibration 6 points under the later part's ceiling
+    assert pd.fits_own_part(98.5, 99.0, 93.0, 99.0)          # 0.5 of them left on its own part
+    assert not pd.fits_own_part(95.5, 99.0, 93.0, 99.0)      # 3.5 of 6: the early part is missed too
+    assert not pd.fits_own_part(97.0, 98.0, 98.0, 99.0)      # missed alike on both parts
+    assert pd.fits_own_part(98.0, 98.0, 97.5, 99.0)          # at its own ceiling: nothing to show there
 
 
 def test_a_parameter_moved_beyond_three_combined_sigma_is_said_and_no_other():
@@ -74,6 +83,8 @@ def test_a_load_picked_up_half_way_is_said_as_the_rig_changing(cli, tmp_path):
     load = next(m for m in drift["moved"] if m["parameter"] == "effects.payload.boom.mass")
     assert load["last"] > load["first"] + 10.0 and load["sigmas"] > pd.SHIFT_SIGMAS
     assert drift["from_s"] >= 36.0 and drift["score_after"] > drift["score_before"]
+    # one load on the first part: its calibration fits that part to within a point of its noise ceiling
+    assert drift["ceiling_first"] - drift["score_first"] < 1.0, drift
     causes = u["record_causes"]
     said = next(i for i, c in enumerate(causes) if c.startswith("the rig changed during the record"))
     assert any("controller's rate" in c for c in causes[said + 1:])

@@ -44,7 +44,7 @@ from .residual_evidence import evidence as residual_evidence
 from .residual_evidence import residual_fails
 from .residual_tests import autocorrelation, independence, ljung_box, spectrum, transfer_estimate
 from .selection import (GRID_SHARE, NOISE_FACTOR, THRESHOLD_POINTS, Evaluation, Setting, affected_joints,
-                        channel_ceilings, free_list, select, without)
+                        channel_ceilings, free_list, noise_ceilings, select, without)
 from .signatures import joint_signatures, public
 from .side_by_side import SideBySide
 from .simulation import Outputs, Runner, choose_numerics, model_spec
@@ -623,7 +623,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         # a rig that changed while it was logged: calibrated again on the validation part alone
         drift = parameter_drift.check(
             base_fast, rec, split, vprob.joints, fast.substep, cal.changes, ceilings,
-            lambda model, runner, prob: calibrate_side_by_side(model, runner, prob, free=pl.free, why=pl.why))
+            lambda model, runner, prob: calibrate_side_by_side(model, runner, prob, free=pl.free, why=pl.why),
+            est, fast, noise_ceilings(est, vprob.joints, noise, pn_val))
         timings["drift"] = time.perf_counter() - t_start
         if drift:
             unexplained["parameter_drift"] = drift

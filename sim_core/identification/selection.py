@@ -252,31 +252,41 @@ def channel_ceilings(st: Setting, joints: list[str]) -> dict[str, dict[str, floa
     """Per joint, the best NRMSE fit (percent) a perfect model could reach on each validation channel
     (angle, velocity and, when recorded, the chambers' pressures), given the noise and, on a
     period-mean replay, the steps' unknown instants (``st.replay_misfit``)."""
-    from scipy.signal import savgol_coeffs
-
     val = st.val
-    w = savgol_window(val.rec.rate)
-    kv = float(np.linalg.norm(savgol_coeffs(w, 2, deriv=1, delta=val.rec.dt)))
-    out = {}
-    for j in joints:
-        chans = {}
-        for ch, sig in (("angle", st.noise.get(j, 0.0)), ("velocity", st.noise.get(j, 0.0) * kv)):
-            y = val.meas[(j, ch)]
-            den = float(np.linalg.norm(y - y.mean())) or 1.0
-            chans[ch] = 100.0 * (1.0 - sig * math.sqrt(y.size) / den)
-        if val.restart:
-            chans["restarted"] = chans["angle"]
-        if (j, "p_a") in val.meas:
-            pc = []
-            for ch in ("p_a", "p_b"):
-                y = val.meas[(j, ch)]
-                den = float(np.linalg.norm(y - y.mean())) or 1.0
-                pc.append(100.0 * (1.0 - st.pressure_noise.get(j, 0.0) * math.sqrt(y.size) / den))
-            chans["pressure"] = float(np.mean(pc))
+    out = noise_ceilings(val, joints, st.noise, st.pressure_noise)
+    for j, chans in out.items():
         for ch in chans:
             extra = st.replay_misfit.get((j, ch))
             if extra:
                 chans[ch] = step_timing.ceiling(chans[ch], val.meas[(j, "angle" if ch == "restarted" else ch)], extra)
+    return out
+
+
+def noise_ceilings(prob: oe.Problem, joints: list[str], noise: dict[str, float],
+                   pressure_noise: dict[str, float]) -> dict[str, dict[str, float]]:
+    """Per joint, the best NRMSE fit (percent) a perfect model could reach on each of ``prob``'s
+    channels given the noise alone (``noise``: angle, rad; ``pressure_noise``: Pa, per joint): the
+    noise's norm against the channel's spread over the problem's window."""
+    from scipy.signal import savgol_coeffs
+
+    w = savgol_window(prob.rec.rate)
+    kv = float(np.linalg.norm(savgol_coeffs(w, 2, deriv=1, delta=prob.rec.dt)))
+    out = {}
+    for j in joints:
+        chans = {}
+        for ch, sig in (("angle", noise.get(j, 0.0)), ("velocity", noise.get(j, 0.0) * kv)):
+            y = prob.meas[(j, ch)]
+            den = float(np.linalg.norm(y - y.mean())) or 1.0
+            chans[ch] = 100.0 * (1.0 - sig * math.sqrt(y.size) / den)
+        if prob.restart:
+            chans["restarted"] = chans["angle"]
+        if (j, "p_a") in prob.meas:
+            pc = []
+            for ch in ("p_a", "p_b"):
+                y = prob.meas[(j, ch)]
+                den = float(np.linalg.norm(y - y.mean())) or 1.0
+                pc.append(100.0 * (1.0 - pressure_noise.get(j, 0.0) * math.sqrt(y.size) / den))
+            chans["pressure"] = float(np.mean(pc))
         out[j] = chans
     return out
 
