@@ -35,7 +35,9 @@ its nominal value) towards the truth. Parameter error: the hidden effect's first
 calibrated value), on the singles named right. Beside it, not scored: the error once the value is
 corrected, with the elasticities the report gives (``elasticity_to_held``), to the truth's values of
 what the calibration held at nominal (the rig's supply, 10 % low): what a user who later reads that
-value off a gauge gets without diagnosing again.
+value off a gauge gets without diagnosing again; and whether the truth lies in the range the report
+gives the value as those held parameters span their declared ranges (``range_given_held``): what a
+user without a gauge is told.
 
 Each single also gets its hidden effect's trace: the RMS difference of the recorded angle with and
 without the effect (noise-free truths for HydroLek; the same closed-loop seed for the rig), printed
@@ -560,6 +562,10 @@ def run_case(case: dict, work: Path) -> dict:
                 # as the calibration's: corrected with the elasticities the report gives to the rig's
                 # true values of what was held (a figure beside the score, not the score)
                 out["error_given_true_held_pct"] = held_corrected_error_pct(got, e, p[key], joint)
+            span = (item.get("range_given_held") or {}).get(key)
+            if span:
+                out["range_given_held"] = [span["lower"], span["upper"]]
+                out["truth_within_range_given_held"] = span["lower"] <= p[key] <= span["upper"]
     elif case["group"] == "clean":
         out["right"] = d["verdict"] == "no_significant_discrepancy"
     else:
@@ -618,6 +624,11 @@ def calibration_finding(d: dict, case: dict, joint: str) -> dict | None:
         # the value corrected with its elasticities to what was held at nominal, given the truth's
         # values of those (a figure beside the score, not the score)
         out["error_given_true_held_pct"] = held_corrected_error_pct(fitted, ch["elasticity_to_held"], truth, joint)
+    span = ch.get("range_given_held")
+    if span and ch["identified"]:
+        # where the report says the value lies as the parameters held at nominal span their declared ranges
+        out["range_given_held"] = [span["lower"], span["upper"]]
+        out["truth_within_range_given_held"] = span["lower"] <= truth <= span["upper"]
     return out
 
 
@@ -652,6 +663,12 @@ def said_as_well(r: dict) -> bool:
     the record does not tell them apart; the spec's range kept the effect named)."""
     beyond = r.get("as_well_beyond_range", [])
     return not r["right"] and any(b.startswith(f"effects.{n}.") for b in beyond for n, _, _ in r["hidden"])
+
+
+def within_given_held(r: dict) -> bool | None:
+    """Whether the truth lies in the range the report gives a right single's value as the parameters
+    held at nominal span their declared ranges; None where the report gives none."""
+    return r.get("truth_within_range_given_held", (r.get("calibration") or {}).get("truth_within_range_given_held"))
 
 
 def summary(rows: list[dict]) -> dict:
@@ -693,6 +710,10 @@ def summary(rows: list[dict]) -> dict:
         "sensor_causes_said": sum(bool(r.get("sensor_causes")) for r in rows),
         # and a rig that changed during the record, where none of the matrix's does
         "drift_said": sum(bool(r.get("drift_said")) for r in rows),
+        # right singles whose value the report gives a range for as the held parameters span their
+        # declared ranges, and of those, the ones whose truth lies in it
+        "singles_with_range_given_held": sum(within_given_held(r) is not None for r in g["singles"] if r["right"]),
+        "singles_truth_within_range_given_held": sum(bool(within_given_held(r)) for r in g["singles"] if r["right"]),
     }
 
 
@@ -790,6 +811,10 @@ def main() -> int:
           f"(a hidden effect's parameter beyond its declared range explains the record as well as the named effect)")
     print(f"  {'sensor interference said':38s} {s['sensor_causes_said']} records (none carries any: want 0)")
     print(f"  {'the rig said to change':38s} {s['drift_said']} records (none changes: want 0)")
+    if s.get("singles_with_range_given_held"):
+        print(f"  {'truth within the range given held':38s} {s['singles_truth_within_range_given_held']} of "
+              f"{s['singles_with_range_given_held']} right singles whose value hangs on a parameter held at nominal "
+              f"(the range the report gives as those span their declared ranges)")
     med = s["median_diagnose_s"]
     print(f"  {'median diagnose time':38s} {'-' if med is None else f'{med:.0f} s'}")
     if args.json:

@@ -341,6 +341,14 @@ def test_a_rigs_wrong_nominal_parameters_are_calibration_findings_not_effects(cl
     for k in measured:
         corrected = rows[k]["value"] * 0.85 ** rows[k]["elasticity_to_held"]["supply.pressure"]
         assert corrected == pytest.approx(true_value(k), rel=0.03, abs=0), k
+    # and the range each such value is given as the supply spans its declared range holds the truth
+    lo, hi = spec.estimated["supply.pressure"]
+    spanned = [k for k in measured if "supply.pressure" in rows[k]["conditional_on"]]
+    assert partner in spanned
+    for k in spanned:
+        s = rows[k]["range_given_held"]
+        assert s["over"] == {"supply.pressure": [lo, hi]}, s
+        assert s["lower"] <= true_value(k) <= s["upper"] and s["lower"] < rows[k]["value"] < s["upper"], (k, s)
     # `hydrohil fit` on the same record, the same elimination: the load it measures follows the supply too
     proc = cli("fit", "--robot", tmp_path / "rig", tmp_path / "rec.csv", "--out", tmp_path / "fit.toml", "--json")
     assert proc.returncode == 0, proc.stderr

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from sim_core.identification import output_error as oe
-from sim_core.identification.conditional import ELASTICITY_LIMIT, conditional_on, corrected, describe, elasticities, given
+from sim_core.identification.conditional import (ELASTICITY_LIMIT, conditional_on, corrected, declared_ranges, describe,
+                                                 elasticities, given, mark, span)
 from sim_core.identification.parameters import FreeParameter
 
 C, B, P, Z = "leak.coefficient", "drive.gain", "supply.pressure", "sensor.offset"
@@ -94,3 +95,37 @@ def test_the_limit_separates_what_matters():
     assert given({"conditional_on": [P, Z], "elasticity_to_held": {P: 0.98}}) == \
         f"given {P} (+0.98 % per %), {Z} at nominal"
     assert given({"elasticity_to_held": {P: 0.98}}) == ""
+
+
+def test_a_value_spans_what_its_held_parameters_declared_ranges_allow():
+    # a load fitted with the supply held at 14 MPa, declared 9.8-16.1 MPa (x0.7 / x1.15): +1.5 % per %
+    ranges = {P: (9.8e6, 16.1e6, 14e6)}
+    s = span(60.0, {P: 1.5}, ranges)
+    assert s["lower"] == pytest.approx(60.0 * 0.7 ** 1.5) and s["upper"] == pytest.approx(60.0 * 1.15 ** 1.5)
+    assert s["over"] == {P: [9.8e6, 16.1e6]}
+    # a coefficient that goes as 1 / supply: the high supply gives the low end
+    s = span(2e-12, {P: -1.0}, ranges)
+    assert s["lower"] == pytest.approx(2e-12 / 1.15) and s["upper"] == pytest.approx(2e-12 / 0.7)
+    # within the value's own range, never cut below the value itself
+    s = span(60.0, {P: 1.5}, ranges, 20.0, 65.0)
+    assert s["upper"] == 65.0 and s["lower"] == pytest.approx(60.0 * 0.7 ** 1.5)
+    assert span(60.0, {P: 1.5}, ranges, 20.0, 50.0)["upper"] == 60.0
+    # two held parameters: their ends multiply
+    two = {P: (9.8e6, 16.1e6, 14e6), B: (0.5, 2.0, 1.0)}
+    s = span(10.0, {P: 1.0, B: -0.5}, two)
+    assert s["lower"] == pytest.approx(10.0 * 0.7 * 2.0 ** -0.5) and s["upper"] == pytest.approx(10.0 * 1.15 * 0.5 ** -0.5)
+    # what the value does not depend on, a range across zero, or no declared range: no span
+    assert span(60.0, {P: 0.5 * ELASTICITY_LIMIT}, ranges) is None
+    assert span(60.0, {Z: 1.0}, {Z: (-0.1, 0.1, 0.05)}) is None
+    assert span(60.0, {P: 1.5}, {}) is None
+
+
+def test_only_ranges_the_spec_declares_are_spanned():
+    declared = FreeParameter(P, 9.8e6, 16.1e6, range_declared=True)
+    searched = FreeParameter(B, 0.1, 10.0)                        # a search span, not the user's word
+    ranges = declared_ranges([declared, searched], {P: 14e6, B: 1.0})
+    assert ranges == {P: (9.8e6, 16.1e6, 14e6)}
+    row = mark({"value": 60.0, "unit": "kg"}, {P: 1.5, B: 1.0}, ranges, FreeParameter("load", 20.0, 85.0))
+    assert row["conditional_on"] == [B, P] and row["range_given_held"]["over"] == {P: [9.8e6, 16.1e6]}
+    assert row["range_given_held"]["upper"] == pytest.approx(60.0 * 1.15 ** 1.5)   # B's search span is not spanned
+    assert given(row).endswith(f"; {60.0 * 0.7 ** 1.5:.4g} to {60.0 * 1.15 ** 1.5:.4g} kg as {P} spans its declared range")

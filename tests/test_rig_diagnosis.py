@@ -173,6 +173,9 @@ def test_a_leak_the_rigs_calibration_absorbs_is_still_named(cli, tmp_path):
     e = named["elasticity_to_held"]["internal"]["supply.pressure"]
     # a leak flow C dp with dp about proportional to the supply: C goes as 1 / supply
     assert -1.5 < e < -0.5, e
+    # as the supply spans the range the rig's spec declares, the coefficient spans one that holds the truth
+    s = named["range_given_held"]["internal"]
+    assert s["lower"] <= leak <= s["upper"] and s["over"] == {"supply.pressure": list(load_robot(tmp_path / "rig").estimated["supply.pressure"])}, s
 
 
 def test_a_leak_fitted_beside_the_rigs_nuisances_is_fitted_to_its_optimum(cli, tmp_path):

@@ -84,6 +84,7 @@ def widened(fp: FreeParameter, side: str, bound: tuple[float, float], absent: fl
             return None
     out = BeyondRange(**{f.name: getattr(fp, f.name) for f in fields(FreeParameter)}, declared=(fp.lower, fp.upper))
     out.lower, out.upper = lower, upper
+    out.range_declared = False          # widened beyond what the spec declares
     out.log = out.lower > 0 and out.upper / out.lower > 3.0
     return out
 

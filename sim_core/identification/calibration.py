@@ -220,7 +220,7 @@ def _estimated(spec, rec: Record, key: str, lo: float, hi: float, switched) -> F
         if not any(e.name == name and e.joint == j for e in spec.effects):
             spec.enable_effect(name, j, **{pname: null})
             switched.append((name, j))
-        return FreeParameter(eff_key, a, b, null=null)
+        return FreeParameter(eff_key, a, b, null=null, range_declared=True)
     if parts[0] == "effects":
         declared(spec, key)
         name, joint = parts[1], (parts[2] if len(parts) == 4 else None)
@@ -228,7 +228,7 @@ def _estimated(spec, rec: Record, key: str, lo: float, hi: float, switched) -> F
             spec.enable_effect(name, joint)
             switched.append((name, joint))
     p = declared(spec, key)
-    fp = FreeParameter(key, max(lo, p.lower), min(hi, p.upper), unit=p.unit)
+    fp = FreeParameter(key, max(lo, p.lower), min(hi, p.upper), unit=p.unit, range_declared=True)
     if not fp.lower < fp.upper:
         raise ValueError(f"range [{lo:g}, {hi:g}] leaves no room inside the parameter's bounds [{p.lower:g}, {p.upper:g}]")
     fp.log = fp.lower > 0 and fp.upper / fp.lower > 3.0
@@ -330,8 +330,8 @@ def calibrate(spec, runner: Runner, problem: oe.Problem, keys: list[str] | None 
     mark_baseline(changes, identifiability(final) if keep else {}, list(dropped))
     mark_kept(changes, protected)
     if keep and dropped:
-        mark_elasticities(changes, conditional.elasticities(final, [fp for fp in free if fp.key in dropped],
-                                                            runner, problem, side))
+        held = [fp for fp in free if fp.key in dropped]
+        mark_elasticities(changes, conditional.elasticities(final, held, runner, problem, side), held, free)
     final.spec = cal_spec
     return Calibration(cal_spec, final, free, changes)
 
@@ -441,13 +441,19 @@ def mark_kept(changes: list[dict], notes: dict[str, str]) -> list[dict]:
     return changes
 
 
-def mark_elasticities(changes: list[dict], rows: dict[str, dict[str, float]]) -> list[dict]:
+def mark_elasticities(changes: list[dict], rows: dict[str, dict[str, float]],
+                      held: list[FreeParameter] = (), free: list[FreeParameter] = ()) -> list[dict]:
     """An identified parameter's row says how far its value hangs on each one reset to nominal
-    (``elasticity_to_held``, conditional.py), and ``conditional_on`` gains those it depends on."""
+    (``elasticity_to_held``, conditional.py), and ``conditional_on`` gains those it depends on; with
+    the ``held`` parameters whose ranges the spec declares, the span its value takes as they span
+    them (``range_given_held``, within its own range among ``free``)."""
+    nominal = {c["parameter"]: c["nominal"] for c in changes}
+    ranges = conditional.declared_ranges(held, nominal)
+    own = {fp.key: fp for fp in free}
     for c in changes:
         e = rows.get(c["parameter"])
         if c["identified"] and e:
-            conditional.mark(c, e)
+            conditional.mark(c, e, ranges, own.get(c["parameter"]))
     return changes
 
 

@@ -73,13 +73,54 @@ def conditional_on(rows: dict[str, float]) -> list[str]:
     return sorted(k for k, e in rows.items() if abs(e) >= ELASTICITY_LIMIT)
 
 
-def mark(row: dict, elasticity: dict[str, float]) -> dict:
+def declared_ranges(held, nominal: dict[str, float]) -> dict[str, tuple[float, float, float]]:
+    """{key: (lower, upper, nominal)} of the ``held`` parameters (FreeParameters) whose range the
+    spec declares (``range_declared``); ``nominal``: the values they are held at."""
+    return {h.key: (float(h.lower), float(h.upper), float(nominal[h.key]))
+            for h in held if h.range_declared and h.key in nominal}
+
+
+def span(value: float, elasticity: dict[str, float], ranges: dict[str, tuple[float, float, float]],
+         lower: float = -math.inf, upper: float = math.inf) -> dict | None:
+    """Where ``value`` lies as each held parameter it depends on spans its declared range (``ranges``:
+    key -> (lower, upper, nominal)), to first order in the logarithms, ``value * (bound / nominal) ** e``
+    for each, the ends multiplied together; within the value's own ``lower``/``upper`` (its range, not
+    cut below what it was fitted to). {'lower', 'upper', 'over': {key: [lower, upper]}}; None where it
+    depends on no held parameter with a positive declared range (a ratio has no meaning across zero)."""
+    lo_f = hi_f = 1.0
+    over = {}
+    for key in conditional_on(elasticity):
+        if key not in ranges:
+            continue
+        a, b, nom = ranges[key]
+        if not (a > 0 and b > 0 and nom > 0):
+            continue
+        e = elasticity[key]
+        f1, f2 = (a / nom) ** e, (b / nom) ** e
+        lo_f *= min(f1, f2)
+        hi_f *= max(f1, f2)
+        over[key] = [a, b]
+    if not over:
+        return None
+    v1, v2 = sorted((value * lo_f, value * hi_f))
+    return {"lower": min(max(v1, lower), value), "upper": max(min(v2, upper), value), "over": over}
+
+
+def mark(row: dict, elasticity: dict[str, float], ranges: dict[str, tuple[float, float, float]] | None = None,
+         own=None) -> dict:
     """``row`` (a measured value's row) with its ``elasticity_to_held`` and, for each held parameter
-    it depends on, ``conditional_on`` extended."""
+    it depends on, ``conditional_on`` extended; with ``ranges`` (:func:`declared_ranges`), where its
+    value lies as those span them (``range_given_held``, :func:`span`, within ``own``'s range: the
+    row's FreeParameter)."""
     row["elasticity_to_held"] = {k: round(e, 3) for k, e in elasticity.items()}
     depends = conditional_on(elasticity)
     if depends:
         row["conditional_on"] = sorted(set(row.get("conditional_on", [])) | set(depends))
+    value = row.get("value")
+    if ranges and value is not None and math.isfinite(value):
+        s = span(float(value), elasticity, ranges, *((own.lower, own.upper) if own is not None else ()))
+        if s is not None:
+            row["range_given_held"] = s
     return row
 
 
@@ -103,4 +144,10 @@ def given(row: dict) -> str:
         return ""
     e = row.get("elasticity_to_held") or {}
     held = [f"{k} ({e[k]:+.2f} % per %)" if k in e else k for k in row["conditional_on"]]
-    return f"given {', '.join(held)} at nominal"
+    out = f"given {', '.join(held)} at nominal"
+    s = row.get("range_given_held")
+    if s:
+        unit = f" {row['unit']}" if row.get("unit") else ""
+        out += (f"; {s['lower']:.4g} to {s['upper']:.4g}{unit} as {', '.join(s['over'])} "
+                f"{'spans its' if len(s['over']) == 1 else 'span their'} declared range")
+    return out

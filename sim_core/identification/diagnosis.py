@@ -515,8 +515,9 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             chosen, final = checked(*again)
         # what the named effects' values take for granted: the calibration's parameters left at nominal
         reset = {c["parameter"] for c in cal.changes if not c["identified"]}
-        hanging = {} if final is None else conditional.elasticities(
-            final, [fp for fp in pl.free if fp.key in reset], accurate, est, side)
+        held_fps = [fp for fp in pl.free if fp.key in reset]
+        hanging = {} if final is None else conditional.elasticities(final, held_fps, accurate, est, side)
+        held_ranges = conditional.declared_ranges(held_fps, {c["parameter"]: c["nominal"] for c in cal.changes})
     ext_acc = final.spec if final is not None else base_acc
     sel.accepted = chosen
     accepted = [(e.candidate, e.effect_params()) for e in chosen]
@@ -546,6 +547,13 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
             params[name] = _absent(fp, v, _bound_of(fp.key, final, ev))
             lo_hi = (final.ci95 if final is not None else ev.ci95).get(fp.key, [v, v])
             ci[name] = [float(lo_hi[0]), float(lo_hi[1])]
+        spans = {}
+        for fp in c.free:
+            name = fp.key.split(".")[-1]
+            if name in elasticity and math.isfinite(params[name]):
+                sp = conditional.span(params[name], hanging[fp.key], held_ranges, fp.lower, fp.upper)
+                if sp is not None:
+                    spans[name] = sp
         for name, v in ev.held_at_default.items():    # what the record does not show apart from the rest
             params[name] = v
             ci[name] = [v, v]
@@ -567,6 +575,8 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         if elasticity:
             item["elasticity_to_held"] = elasticity
             item["conditional_on"] = sorted({k for row in elasticity.values() for k in conditional.conditional_on(row)})
+        if spans:
+            item["range_given_held"] = spans
         if ev.pair is None:
             item.update(rivalry(ev, sel.rounds[ev.round - 1], rec.has_pressures, acts_on))
         else:
@@ -674,7 +684,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         tests["extended"] = tests["baseline"]
     # the calibrated parameters as the extended model has them: refitted beside the named effects, and
     # a recalibration may have identified more of them than the baseline did (extended.toml carries these)
-    calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging) if selected else {}
+    calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging, held_ranges) if selected else {}
     this = _score(ext_fits, vprob.joints)     # the answer's validation score (points)
     if selected and hold is not None:
         # the record does not tell a controller faster than its log from a valve half a period slower:
@@ -891,15 +901,16 @@ def _absent(fp: FreeParameter, v: float, side: str | None) -> float:
     return float(v)
 
 
-def _refitted(model, keys: list[str], changes: list[dict], hanging: dict) -> dict:
-    """{key: {value, nominal[, elasticity_to_held, conditional_on]}} of the calibrated parameters the
-    final refit fitted beside the named effects, as ``model`` (the extended model) has them."""
+def _refitted(model, keys: list[str], changes: list[dict], hanging: dict, held_ranges: dict) -> dict:
+    """{key: {value, nominal[, elasticity_to_held, conditional_on, range_given_held]}} of the
+    calibrated parameters the final refit fitted beside the named effects, as ``model`` (the extended
+    model) has them."""
     nominal = {c["parameter"]: c["nominal"] for c in changes}
     out = {}
     for k in keys:
         row = {"value": _num(free_parameter(model, k).get(model)), "nominal": _num(nominal.get(k, math.nan))}
         if hanging.get(k):
-            conditional.mark(row, hanging[k])
+            conditional.mark(row, hanging[k], held_ranges)
         out[k] = row
     return out
 

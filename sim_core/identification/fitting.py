@@ -179,10 +179,12 @@ def _run_fit(spec, rec: Record, keys: list[str] | None, *, val: Record | None, m
     mark_kept(changes, protected)
     reset_keys = [fp for fp in polish if verdict[fp.key] is not None]
     if reset_keys and final.free:
-        mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob, side))
+        mark_elasticities(changes, conditional.elasticities(final, reset_keys, accurate, prob, side),
+                          [fp for fp in free if verdict[fp.key] is not None], free)
         for row in changes:
-            if "elasticity_to_held" in row:
-                result["parameters"][row["parameter"]]["elasticity_to_held"] = row["elasticity_to_held"]
+            for key in ("elasticity_to_held", "range_given_held"):
+                if key in row:
+                    result["parameters"][row["parameter"]][key] = row[key]
     result["calibration"] = {"changes": changes, "held": held}
     if out:
         configured = spec.copy()

@@ -28,6 +28,7 @@ class FreeParameter:
     log: bool = False
     null: float | None = None       # value at which an effect vanishes (significance is measured from it)
     unit: str = ""
+    range_declared: bool = False    # the range is the spec's own ([estimated]): the user's word on where the value lies
 
     # ---- coordinates --------------------------------------------------------------------------
     def _t(self, v: float) -> float:
