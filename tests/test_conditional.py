@@ -92,6 +92,9 @@ def test_the_limit_separates_what_matters():
     assert conditional_on({P: -ELASTICITY_LIMIT, Z: 0.5 * ELASTICITY_LIMIT, B: math.nan}) == [P]
     lines = describe({"elasticity_to_held": {"internal": {P: -1.29, Z: 0.1}}})
     assert len(lines) == 1 and P in lines[0] and "-1.29" in lines[0]
+    lines = describe({"elasticity_to_held": {"internal": {P: -1.29}},
+                      "range_given_held": {"internal": {"lower": 1e-12, "upper": 2e-12, "over": {P: [1.0, 2.0]}}}})
+    assert len(lines) == 2 and lines[1] == f"internal lies between 1e-12 and 2e-12 as {P} spans its declared range, to first order"
     assert given({"conditional_on": [P, Z], "elasticity_to_held": {P: 0.98}}) == \
         f"given {P} (+0.98 % per %), {Z} at nominal"
     assert given({"elasticity_to_held": {P: 0.98}}) == ""

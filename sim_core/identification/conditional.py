@@ -128,12 +128,17 @@ def describe(named: dict) -> list[str]:
     """One line per value of a named effect (a ``selected`` item of the diagnosis) that hangs on a
     held parameter: which, how much, and the correction once its true value is known."""
     lines = []
+    spans = named.get("range_given_held", {})
     for param, row in named.get("elasticity_to_held", {}).items():
         for key in conditional_on(row):
             e = row[key]
             lines.append(f"{param} is conditional on {key} held at nominal: {e:+.2f} % per % of it "
                          f"(with its true value, about {param} x (true / nominal) ^ {e:.2f}; without the linearisation: that "
                          f"value in the robot's spec and the record diagnosed again)")
+        s = spans.get(param)
+        if s:
+            lines.append(f"{param} lies between {s['lower']:.4g} and {s['upper']:.4g} as {', '.join(s['over'])} "
+                         f"{'spans its' if len(s['over']) == 1 else 'span their'} declared range, to first order")
     return lines
 
 
