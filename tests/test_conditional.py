@@ -117,6 +117,9 @@ def test_a_value_spans_what_its_held_parameters_declared_ranges_allow():
     two = {P: (9.8e6, 16.1e6, 14e6), B: (0.5, 2.0, 1.0)}
     s = span(10.0, {P: 1.0, B: -0.5}, two)
     assert s["lower"] == pytest.approx(10.0 * 0.7 * 2.0 ** -0.5) and s["upper"] == pytest.approx(10.0 * 1.15 * 0.5 ** -0.5)
+    # an elasticity the first order cannot carry over the range: bounded by the value's own range
+    s = span(60.0, {P: 5e3}, ranges, 20.0, 85.0)
+    assert (s["lower"], s["upper"]) == (20.0, 85.0)
     # what the value does not depend on, a range across zero, or no declared range: no span
     assert span(60.0, {P: 0.5 * ELASTICITY_LIMIT}, ranges) is None
     assert span(60.0, {Z: 1.0}, {Z: (-0.1, 0.1, 0.05)}) is None

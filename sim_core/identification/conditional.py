@@ -25,6 +25,7 @@ from .parameters import FreeParameter
 # practical purposes: a held value 30 % off (the far end of a rig's spec) then moves it less than 6 %
 ELASTICITY_LIMIT = 0.2
 STEP_REL = 2e-3         # the held parameter's forward step, relative to its value
+MAX_LOG_FACTOR = 50.0   # span: a factor beyond e^50 on a value is taken as e^50 (the value's own range cuts it)
 
 
 def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, side=None) -> dict[str, dict[str, float]]:
@@ -87,7 +88,7 @@ def span(value: float, elasticity: dict[str, float], ranges: dict[str, tuple[flo
     for each, the ends multiplied together; within the value's own ``lower``/``upper`` (its range, not
     cut below what it was fitted to). {'lower', 'upper', 'over': {key: [lower, upper]}}; None where it
     depends on no held parameter with a positive declared range (a ratio has no meaning across zero)."""
-    lo_f = hi_f = 1.0
+    lo_log = hi_log = 0.0          # the ends' factors, as logarithms (an elasticity of 1e3 overflows a power)
     over = {}
     for key in conditional_on(elasticity):
         if key not in ranges:
@@ -96,13 +97,15 @@ def span(value: float, elasticity: dict[str, float], ranges: dict[str, tuple[flo
         if not (a > 0 and b > 0 and nom > 0):
             continue
         e = elasticity[key]
-        f1, f2 = (a / nom) ** e, (b / nom) ** e
-        lo_f *= min(f1, f2)
-        hi_f *= max(f1, f2)
+        l1, l2 = e * math.log(a / nom), e * math.log(b / nom)
+        lo_log += min(l1, l2)
+        hi_log += max(l1, l2)
         over[key] = [a, b]
     if not over:
         return None
-    v1, v2 = sorted((value * lo_f, value * hi_f))
+    # beyond a factor of e^MAX_LOG_FACTOR the first order says only that the value is not bounded there
+    f1, f2 = math.exp(max(lo_log, -MAX_LOG_FACTOR)), math.exp(min(hi_log, MAX_LOG_FACTOR))
+    v1, v2 = sorted((value * f1, value * f2))
     return {"lower": min(max(v1, lower), value), "upper": max(min(v2, upper), value), "over": over}
 
 

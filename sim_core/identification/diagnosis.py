@@ -684,7 +684,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         tests["extended"] = tests["baseline"]
     # the calibrated parameters as the extended model has them: refitted beside the named effects, and
     # a recalibration may have identified more of them than the baseline did (extended.toml carries these)
-    calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging, held_ranges) if selected else {}
+    calib["refitted_with_effects"] = _refitted(ext_acc, keys, cal.changes, hanging, held_ranges, pl.free) if selected else {}
     this = _score(ext_fits, vprob.joints)     # the answer's validation score (points)
     if selected and hold is not None:
         # the record does not tell a controller faster than its log from a valve half a period slower:
@@ -901,16 +901,17 @@ def _absent(fp: FreeParameter, v: float, side: str | None) -> float:
     return float(v)
 
 
-def _refitted(model, keys: list[str], changes: list[dict], hanging: dict, held_ranges: dict) -> dict:
+def _refitted(model, keys: list[str], changes: list[dict], hanging: dict, held_ranges: dict, free: list) -> dict:
     """{key: {value, nominal[, elasticity_to_held, conditional_on, range_given_held]}} of the
     calibrated parameters the final refit fitted beside the named effects, as ``model`` (the extended
-    model) has them."""
+    model) has them (``free``: the calibration's FreeParameters, whose ranges bound the spans)."""
     nominal = {c["parameter"]: c["nominal"] for c in changes}
+    own = {fp.key: fp for fp in free}
     out = {}
     for k in keys:
         row = {"value": _num(free_parameter(model, k).get(model)), "nominal": _num(nominal.get(k, math.nan))}
         if hanging.get(k):
-            conditional.mark(row, hanging[k], held_ranges)
+            conditional.mark(row, hanging[k], held_ranges, own.get(k))
         out[k] = row
     return out
 
