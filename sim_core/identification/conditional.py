@@ -140,8 +140,7 @@ def describe(named: dict) -> list[str]:
                          f"value in the robot's spec and the record diagnosed again)")
         s = spans.get(param)
         if s:
-            lines.append(f"{param} lies between {s['lower']:.4g} and {s['upper']:.4g} as {', '.join(s['over'])} "
-                         f"{'spans its' if len(s['over']) == 1 else 'span their'} declared range, to first order")
+            lines.append(f"{param} lies between {s['lower']:.4g} and {s['upper']:.4g} {_spanning(s)}, to first order")
     return lines
 
 
@@ -156,6 +155,10 @@ def given(row: dict) -> str:
     s = row.get("range_given_held")
     if s:
         unit = f" {row['unit']}" if row.get("unit") else ""
-        out += (f"; {s['lower']:.4g} to {s['upper']:.4g}{unit} as {', '.join(s['over'])} "
-                f"{'spans its' if len(s['over']) == 1 else 'span their'} declared range")
+        out += f"; {s['lower']:.4g} to {s['upper']:.4g}{unit} {_spanning(s)}"
     return out
+
+
+def _spanning(s: dict) -> str:
+    """'as K spans its declared range' (or 'as K1, K2 span their ...') for a :func:`span`."""
+    return f"as {', '.join(s['over'])} {'spans its' if len(s['over']) == 1 else 'span their'} declared range"

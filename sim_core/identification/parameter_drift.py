@@ -83,7 +83,7 @@ def check(model, rec, start: int, joints: list[str], substep: float | None, chan
     fits = prob.fits(before)
     score_before = _score(fits)
     ceiling = _ceiling(fits, ceilings, joints)
-    own = early_runner.simulate(model)
+    own = early_runner.simulate(model, early.n)
     if not own.ok:
         return {}
     own_fits = {j: {c: v for c, v in f.items() if c in ("angle", "velocity", "pressure")}
