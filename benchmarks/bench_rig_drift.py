@@ -93,6 +93,9 @@ def main() -> int:
             drift = (d.get("unexplained") or {}).get("parameter_drift") or {}
             moved = "; ".join(f"{m['parameter'].split('.', 1)[1]} {m['first']:.4g} -> {m['last']:.4g} ({m['sigmas']:.0f} sigma)"
                               for m in drift.get("moved", []))
+            if drift.get("jointly"):
+                j = drift["jointly"]
+                moved = f"together, chi-square {j['chi2']:.0f} on {j['dof']} (level {j['level']:.1f}): {moved}"
             print(f"seed {seed} {kind:6s} {d['verdict']:27s} {named or '-':24s} "
                   f"{'said: ' + moved if drift else 'not said'}"
                   + (f" (later part {drift['score_before']:.1f} -> {drift['score_after']:.1f}, ceiling {drift['ceiling']:.1f})"

@@ -634,7 +634,7 @@ def _run(spec, rec: Record, val: Record | None, *, workers: int, progress: bool,
         drift = parameter_drift.check(
             base_fast, rec, split, vprob.joints, fast.substep, cal.changes, ceilings,
             lambda model, runner, prob: calibrate_side_by_side(model, runner, prob, free=pl.free, why=pl.why),
-            est, fast, noise_ceilings(est, vprob.joints, noise, pn_val))
+            est, fast, noise_ceilings(est, vprob.joints, noise, pn_val), first=cal.result)
         timings["drift"] = time.perf_counter() - t_start
         if drift:
             unexplained["parameter_drift"] = drift

@@ -23,7 +23,9 @@ it, calibrated again on it, and the change is said when
   effect the bank leaves unnamed that the later part shows more of (a flow limit its steps reach
   more often) also moves the recalibrated parameters, but the early part's misfit shows it there too;
 * at least one parameter it identifies moved more than SHIFT_SIGMAS standard errors (both
-  calibrations' combined) from the early calibration's value.
+  calibrations' combined) from the early calibration's value, or the parameters both identify moved
+  together beyond the same level (:func:`moved_jointly`): a flow gain and a load the record fixes
+  mostly as a ratio each move less than their own wide sigma when that ratio changes.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.stats import chi2, norm
 
 from . import output_error as oe
 from .metrics import velocity
@@ -62,17 +65,19 @@ def _score(fits: dict) -> float:
 
 def check(model, rec, start: int, joints: list[str], substep: float | None, changes: list[dict],
           ceilings: dict[str, dict[str, float]], calibrate, early: oe.Problem, early_runner: Runner,
-          early_ceilings: dict[str, dict[str, float]]) -> dict:
+          early_ceilings: dict[str, dict[str, float]], first: oe.FitResult | None = None) -> dict:
     """The change of the rig between the record's first part and its part from ``start`` on.
 
     ``model``: the baseline calibrated on the first part, with ``changes`` its calibration rows
     (calibration.Calibration.changes); ``ceilings``: the channels' noise ceilings per joint (fit, %);
     ``calibrate(model, runner, problem)``: the same calibration on another record; ``early``: the
     estimation window the model was calibrated on, simulated by ``early_runner``, with its channels'
-    noise ceilings ``early_ceilings``. Returns {} when the later part is not explained by
-    calibrating on it alone, the early part is missed as much, or no parameter moved; otherwise
-    {'from_s', 'score_before', 'score_after', 'ceiling', 'score_first', 'ceiling_first', 'moved':
-    [{parameter, first, last, sigma, sigmas, unit}]}."""
+    noise ceilings ``early_ceilings``; ``first``: the early calibration's fit (its covariance, for
+    :func:`moved_jointly`). Returns {} when the later part is not explained by calibrating on it
+    alone, the early part is missed as much, or no parameter moved; otherwise {'from_s',
+    'score_before', 'score_after', 'ceiling', 'score_first', 'ceiling_first', 'moved': [{parameter,
+    first, last, sigma, sigmas, unit}]}, with 'jointly': {chi2, dof, level} where the parameters
+    moved only together."""
     s0 = still_start(rec, start, joints)
     late = rec.tail(s0)
     runner = Runner(late, substep)
@@ -100,11 +105,19 @@ def check(model, rec, start: int, joints: list[str], substep: float | None, chan
     if not closes(score_before, score_after, ceiling):
         return {}
     shifted = moved(changes, cal.changes)
+    together = None
+    if not shifted and first is not None:
+        together = moved_jointly(changes, cal.changes, first, cal.result)
+        if together is not None:
+            shifted = moved(changes, cal.changes, 0.0)
     if not shifted:
         return {}
-    return {"from_s": round(float(rec.time[s0]), 3), "score_before": round(score_before, 3),
-            "score_after": round(score_after, 3), "ceiling": round(ceiling, 3),
-            "score_first": round(score_first, 3), "ceiling_first": round(ceiling_first, 3), "moved": shifted}
+    out = {"from_s": round(float(rec.time[s0]), 3), "score_before": round(score_before, 3),
+           "score_after": round(score_after, 3), "ceiling": round(ceiling, 3),
+           "score_first": round(score_first, 3), "ceiling_first": round(ceiling_first, 3), "moved": shifted}
+    if together is not None:
+        out["jointly"] = together
+    return out
 
 
 def _ceiling(fits: dict, ceilings: dict[str, dict[str, float]], joints: list[str]) -> float:
@@ -127,27 +140,69 @@ def closes(score_before: float, score_after: float, ceiling: float) -> bool:
     return gap > 0 and score_after - score_before >= CLOSED_SHARE * gap
 
 
-def moved(first: list[dict], last: list[dict]) -> list[dict]:
+def moved(first: list[dict], last: list[dict], sigmas: float = SHIFT_SIGMAS) -> list[dict]:
     """The parameters both calibrations identify (their ``changes`` rows) whose values differ by more
-    than SHIFT_SIGMAS combined standard errors, the furthest first."""
-    early = {c["parameter"]: c for c in first if c.get("identified")}
+    than ``sigmas`` combined standard errors, the furthest first."""
     out = []
-    for c in last:
-        e = early.get(c["parameter"])
-        if not c.get("identified") or e is None:
-            continue
+    for e, c in _both(first, last):
         sigma = math.hypot(float(c["sigma"]), float(e["sigma"]))
         shift = float(c["value"]) - float(e["value"])
-        if sigma > 0 and abs(shift) > SHIFT_SIGMAS * sigma:
+        if sigma > 0 and abs(shift) > sigmas * sigma:
             out.append({"parameter": c["parameter"], "first": float(e["value"]), "last": float(c["value"]),
                         "sigma": sigma, "sigmas": abs(shift) / sigma, "unit": c.get("unit", "")})
     return sorted(out, key=lambda m: -m["sigmas"])
+
+
+def _both(first: list[dict], last: list[dict]) -> list[tuple[dict, dict]]:
+    """(early row, later row) of each parameter both calibrations identify, in the later rows' order."""
+    early = {c["parameter"]: c for c in first if c.get("identified")}
+    return [(early[c["parameter"]], c) for c in last if c.get("identified") and c["parameter"] in early]
+
+
+def moved_jointly(first: list[dict], last: list[dict], fit_first: oe.FitResult, fit_last: oe.FitResult) -> dict | None:
+    """The shift of the parameters both calibrations identify, taken together: ``d' (C1 + C2)^-1 d``
+    with ``C1``, ``C2`` the two fits' covariances (of parts of the record that share no sample: they
+    add), a chi-square with as many degrees of freedom as parameters. {'chi2', 'dof', 'level'} when it
+    passes ``level``, the chi-square whose tail is that of SHIFT_SIGMAS for one parameter (for one the
+    rule of :func:`moved`); None otherwise, or where a covariance is missing."""
+    pairs = _both(first, last)
+    if not pairs:
+        return None
+    keys = [c["parameter"] for _, c in pairs]
+    c1, c2 = covariance(fit_first, keys), covariance(fit_last, keys)
+    if c1 is None or c2 is None:
+        return None
+    d = np.array([float(c["value"]) - float(e["value"]) for e, c in pairs])
+    try:
+        q = float(d @ np.linalg.solve(c1 + c2, d))
+    except np.linalg.LinAlgError:
+        return None
+    level = float(chi2.isf(2.0 * norm.sf(SHIFT_SIGMAS), len(keys)))
+    if not (math.isfinite(q) and q > level):
+        return None
+    return {"chi2": round(q, 2), "dof": len(keys), "level": round(level, 2)}
+
+
+def covariance(fit: oe.FitResult, keys: list[str]) -> np.ndarray | None:
+    """The covariance of ``keys`` (physical units) from ``fit``'s sigmas and correlation; None where
+    ``fit`` has none of them or one is not finite."""
+    order = [fp.key for fp in fit.free]
+    if fit.correlation is None or any(k not in order or k not in fit.sigma for k in keys):
+        return None
+    idx = [order.index(k) for k in keys]
+    s = np.array([fit.sigma[k] for k in keys])
+    C = np.asarray(fit.correlation)[np.ix_(idx, idx)] * np.outer(s, s)
+    return C if np.all(np.isfinite(C)) else None
 
 
 def cause(found: dict) -> str:
     """The record cause for :func:`check`'s finding."""
     moved = "; ".join(f"{m['parameter']} {m['first']:.4g} -> {m['last']:.4g}" + (f" {m['unit']}" if m["unit"] else "")
                       + f" ({m['sigmas']:.0f} sigma)" for m in found["moved"])
+    j = found.get("jointly")
+    if j:
+        moved = (f"together (chi-square {j['chi2']:.1f} on {j['dof']} parameters, beyond its {SHIFT_SIGMAS:g}-sigma "
+                 f"level {j['level']:.1f}; each alone within its own uncertainty): {moved}")
     return (f"the rig changed during the record: calibrated again on the record from {found['from_s']:.1f} s on "
             f"alone, the model fits that part at {found['score_after']:.1f} (its noise ceiling "
             f"{found['ceiling']:.1f}) against "
