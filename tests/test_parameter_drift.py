@@ -78,7 +78,7 @@ def test_parameters_that_move_together_across_what_the_record_fixes_are_said_alo
     found = {"from_s": 30.0, "score_before": 93.0, "score_after": 98.0, "ceiling": 99.0, "jointly": j,
              "moved": pd.moved(first, across, 0.0)}
     assert [m["parameter"] for m in found["moved"]] == ["q", "m"]
-    assert "together (chi-square" in pd.cause(found) and "each alone within its own uncertainty" in pd.cause(found)
+    assert "together (chi-square" in pd.cause(found) and "none beyond 3 sigma alone" in pd.cause(found)
 
 
 def _record(angle):

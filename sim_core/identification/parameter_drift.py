@@ -202,7 +202,7 @@ def cause(found: dict) -> str:
     j = found.get("jointly")
     if j:
         moved = (f"together (chi-square {j['chi2']:.1f} on {j['dof']} parameters, beyond its {SHIFT_SIGMAS:g}-sigma "
-                 f"level {j['level']:.1f}; each alone within its own uncertainty): {moved}")
+                 f"level {j['level']:.1f}; none beyond {SHIFT_SIGMAS:g} sigma alone): {moved}")
     return (f"the rig changed during the record: calibrated again on the record from {found['from_s']:.1f} s on "
             f"alone, the model fits that part at {found['score_after']:.1f} (its noise ceiling "
             f"{found['ceiling']:.1f}) against "
