@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2, norm
 
 from . import conditional
 from . import output_error as oe
@@ -361,7 +360,7 @@ def jointly_identified(current: oe.FitResult, without: oe.FitResult, k: int) -> 
     scale = current.cost_scale
     if scale is None or not math.isfinite(scale) or scale <= 0 or not without.ok:
         return False
-    level = float(chi2.isf(2.0 * norm.sf(IDENTIFIED_RATIO), k))
+    level = oe.sigma_level(IDENTIFIED_RATIO, k)
     return without.cost - current.cost > level * scale
 
 

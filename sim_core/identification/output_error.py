@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2, norm
 
 from .metrics import effective_samples, nrmse_fit, savgol_window, smoothed, velocity
 from .parameters import FreeParameter
@@ -211,6 +212,17 @@ class FitResult:
     # the simulation at the optimum, where a least-squares evaluation made it: it carries its end, so a
     # longer run of the fitted model continues from it (Runner.simulate(resume=))
     outputs: Outputs | None = None
+
+    def covariance(self, keys: list[str]) -> np.ndarray | None:
+        """The covariance of ``keys`` (physical units) from the sigmas and the correlation; None where
+        the fit has none for one of them or one is not finite."""
+        order = [fp.key for fp in self.free]
+        if self.correlation is None or any(k not in order or k not in self.sigma for k in keys):
+            return None
+        idx = [order.index(k) for k in keys]
+        s = np.array([self.sigma[k] for k in keys])
+        C = np.asarray(self.correlation)[np.ix_(idx, idx)] * np.outer(s, s)
+        return C if np.all(np.isfinite(C)) else None
 
     def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
         """'lower'/'upper' when the estimate sits on a search bound, else None."""
@@ -510,6 +522,12 @@ def _exceeds(gp: Problem, limit: float):
     def stop(partial) -> bool:
         return gp.profiled_bound(partial) > limit * (1.0 + 1e-9)
     return stop
+
+
+def sigma_level(sigmas: float, dof: int) -> float:
+    """The chi-square of ``dof`` degrees of freedom whose tail is that of ``|value/sigma| = sigmas`` for
+    one parameter (two-sided): the level that ``dof`` parameters taken together must pass."""
+    return float(chi2.isf(2.0 * norm.sf(sigmas), dof))
 
 
 def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:

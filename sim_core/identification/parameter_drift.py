@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.stats import chi2, norm
 
 from . import output_error as oe
 from .metrics import velocity
@@ -169,7 +168,7 @@ def moved_jointly(first: list[dict], last: list[dict], fit_first: oe.FitResult, 
     if not pairs:
         return None
     keys = [c["parameter"] for _, c in pairs]
-    c1, c2 = covariance(fit_first, keys), covariance(fit_last, keys)
+    c1, c2 = fit_first.covariance(keys), fit_last.covariance(keys)
     if c1 is None or c2 is None:
         return None
     d = np.array([float(c["value"]) - float(e["value"]) for e, c in pairs])
@@ -177,22 +176,10 @@ def moved_jointly(first: list[dict], last: list[dict], fit_first: oe.FitResult, 
         q = float(d @ np.linalg.solve(c1 + c2, d))
     except np.linalg.LinAlgError:
         return None
-    level = float(chi2.isf(2.0 * norm.sf(SHIFT_SIGMAS), len(keys)))
+    level = oe.sigma_level(SHIFT_SIGMAS, len(keys))
     if not (math.isfinite(q) and q > level):
         return None
     return {"chi2": round(q, 2), "dof": len(keys), "level": round(level, 2)}
-
-
-def covariance(fit: oe.FitResult, keys: list[str]) -> np.ndarray | None:
-    """The covariance of ``keys`` (physical units) from ``fit``'s sigmas and correlation; None where
-    ``fit`` has none of them or one is not finite."""
-    order = [fp.key for fp in fit.free]
-    if fit.correlation is None or any(k not in order or k not in fit.sigma for k in keys):
-        return None
-    idx = [order.index(k) for k in keys]
-    s = np.array([fit.sigma[k] for k in keys])
-    C = np.asarray(fit.correlation)[np.ix_(idx, idx)] * np.outer(s, s)
-    return C if np.all(np.isfinite(C)) else None
 
 
 def cause(found: dict) -> str:
