@@ -81,6 +81,34 @@ def test_parameters_that_move_together_across_what_the_record_fixes_are_said_alo
     assert "together (chi-square" in pd.cause(found) and "none beyond 3 sigma alone" in pd.cause(found)
 
 
+def test_a_parameter_the_later_part_held_is_weighed_where_the_early_part_put_it():
+    # the early part fixes a flow gain q and a load m mostly as a ratio (correlation 0.99, each sigma 1);
+    # the later calibration frees q only and holds m at the early value: its q is compared with the
+    # early q at that m, whose uncertainty is that across the ratio, sqrt(1 - 0.99^2) = 0.141
+    C = [[1.0, 0.99], [0.99, 1.0]]
+    early = _fit(["q", "m"], [1, 1], C)
+    assert early.covariance(["q"], ["m"])[0, 0] == pytest.approx(1 - 0.99 ** 2)
+    assert early.covariance(["q"])[0, 0] == pytest.approx(1.0)
+    later = _fit(["q"], [0.1], [[1.0]])
+    first = [_row("q", 10.0, 1.0), _row("m", 20.0, 1.0)]
+    last = [_row("q", 10.8, 0.1), _row("m", 20.0, 50.0, identified=False)]
+    assert pd.held_later(first, last, early, later) == ["m"]
+    # a load the later calibration set elsewhere (back to the spec's) is not held where the early one put it
+    assert pd.held_later(first, [_row("q", 10.8, 0.1), _row("m", 25.0, 50.0, identified=False)], early, later) == []
+    out = pd.moved(first, last, fits=(early, later))
+    sigma = (1 - 0.99 ** 2 + 0.01) ** 0.5
+    assert [m["parameter"] for m in out] == ["q"] and out[0]["sigma"] == pytest.approx(sigma)
+    assert out[0]["sigmas"] == pytest.approx(0.8 / sigma)            # 4.6 sigma
+    # each alone (its own sigma, the later one's added): 0.8 sigma, not said
+    assert pd.moved(first, last) == []
+    # a later calibration that frees the load too carries the ratio's uncertainty itself: not said
+    both = _fit(["q", "m"], [1, 1], C)
+    assert pd.held_later(first, [_row("q", 10.8, 1.0), _row("m", 20.0, 1.0)], early, both) == []
+    assert pd.moved(first, [_row("q", 10.8, 1.0), _row("m", 20.0, 1.0)], fits=(early, both)) == []
+    # along the ratio, with the load held, a flow gain that stayed is not said
+    assert pd.moved(first, [_row("q", 10.2, 0.1)], fits=(early, later)) == []
+
+
 def _record(angle):
     n = angle.size
     t = np.arange(n) * 0.02

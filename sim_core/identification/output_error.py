@@ -213,16 +213,26 @@ class FitResult:
     # longer run of the fitted model continues from it (Runner.simulate(resume=))
     outputs: Outputs | None = None
 
-    def covariance(self, keys: list[str]) -> np.ndarray | None:
+    def covariance(self, keys: list[str], given: list[str] = ()) -> np.ndarray | None:
         """The covariance of ``keys`` (physical units) from the sigmas and the correlation; None where
-        the fit has none for one of them or one is not finite."""
+        the fit has none for one of them or one is not finite. ``given``: other free keys held at their
+        fitted values (a later fit that keeps them where this one put them): the covariance of ``keys``
+        conditional on them, ``C_kk - C_kg C_gg^-1 C_gk``. Along a valley the record fixes as a ratio,
+        each parameter alone is uncertain; with its partner held, it is not."""
         order = [fp.key for fp in self.free]
-        if self.correlation is None or any(k not in order or k not in self.sigma for k in keys):
+        every = list(keys) + [g for g in given if g not in keys]
+        if self.correlation is None or any(k not in order or k not in self.sigma for k in every):
             return None
-        idx = [order.index(k) for k in keys]
-        s = np.array([self.sigma[k] for k in keys])
+        idx = [order.index(k) for k in every]
+        s = np.array([self.sigma[k] for k in every])
         C = np.asarray(self.correlation)[np.ix_(idx, idx)] * np.outer(s, s)
-        return C if np.all(np.isfinite(C)) else None
+        if not np.all(np.isfinite(C)):
+            return None
+        n = len(keys)
+        if len(every) == n:
+            return C
+        cross = C[:n, n:]
+        return C[:n, :n] - cross @ np.linalg.pinv(C[n:, n:]) @ cross.T
 
     def at_bound(self, key: str, tol: float = 2e-3) -> str | None:
         """'lower'/'upper' when the estimate sits on a search bound, else None."""

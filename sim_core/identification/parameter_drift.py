@@ -25,7 +25,9 @@ it, calibrated again on it, and the change is said when
 * at least one parameter it identifies moved more than SHIFT_SIGMAS standard errors (both
   calibrations' combined) from the early calibration's value, or the parameters both identify moved
   together beyond the same level (:func:`moved_jointly`): a flow gain and a load the record fixes
-  mostly as a ratio each move less than their own wide sigma when that ratio changes.
+  mostly as a ratio each move less than their own wide sigma when that ratio changes. The early
+  calibration's uncertainty is taken where the later one held what it could not identify (at the
+  early values): conditional on those parameters (:func:`shift_covariance`).
 """
 
 from __future__ import annotations
@@ -103,12 +105,13 @@ def check(model, rec, start: int, joints: list[str], substep: float | None, chan
     score_after = _score(prob.fits(after))
     if not closes(score_before, score_after, ceiling):
         return {}
-    shifted = moved(changes, cal.changes)
+    fits = None if first is None else (first, cal.result)
+    shifted = moved(changes, cal.changes, fits=fits)
     together = None
-    if not shifted and first is not None:
-        together = moved_jointly(changes, cal.changes, first, cal.result)
+    if not shifted and fits is not None:
+        together = moved_jointly(changes, cal.changes, *fits)
         if together is not None:
-            shifted = moved(changes, cal.changes, 0.0)
+            shifted = moved(changes, cal.changes, 0.0, fits=fits)
     if not shifted:
         return {}
     out = {"from_s": round(float(rec.time[s0]), 3), "score_before": round(score_before, 3),
@@ -139,12 +142,17 @@ def closes(score_before: float, score_after: float, ceiling: float) -> bool:
     return gap > 0 and score_after - score_before >= CLOSED_SHARE * gap
 
 
-def moved(first: list[dict], last: list[dict], sigmas: float = SHIFT_SIGMAS) -> list[dict]:
+def moved(first: list[dict], last: list[dict], sigmas: float = SHIFT_SIGMAS,
+          fits: tuple[oe.FitResult, oe.FitResult] | None = None) -> list[dict]:
     """The parameters both calibrations identify (their ``changes`` rows) whose values differ by more
-    than ``sigmas`` combined standard errors, the furthest first."""
+    than ``sigmas`` combined standard errors, the furthest first. ``fits``: the two calibrations' fits,
+    whose covariances give the combined standard errors (:func:`shift_covariance`); without them (or
+    where one has none) the rows' own sigmas, combined as independent."""
+    pairs = _both(first, last)
+    cov = shift_covariance(first, last, *fits) if fits is not None else None
     out = []
-    for e, c in _both(first, last):
-        sigma = math.hypot(float(c["sigma"]), float(e["sigma"]))
+    for i, (e, c) in enumerate(pairs):
+        sigma = math.sqrt(max(float(cov[i, i]), 0.0)) if cov is not None else math.hypot(float(c["sigma"]), float(e["sigma"]))
         shift = float(c["value"]) - float(e["value"])
         if sigma > 0 and abs(shift) > sigmas * sigma:
             out.append({"parameter": c["parameter"], "first": float(e["value"]), "last": float(c["value"]),
@@ -159,27 +167,54 @@ def _both(first: list[dict], last: list[dict]) -> list[tuple[dict, dict]]:
 
 
 def moved_jointly(first: list[dict], last: list[dict], fit_first: oe.FitResult, fit_last: oe.FitResult) -> dict | None:
-    """The shift of the parameters both calibrations identify, taken together: ``d' (C1 + C2)^-1 d``
-    with ``C1``, ``C2`` the two fits' covariances (of parts of the record that share no sample: they
-    add), a chi-square with as many degrees of freedom as parameters. {'chi2', 'dof', 'level'} when it
-    passes ``level``, the chi-square whose tail is that of SHIFT_SIGMAS for one parameter (for one the
-    rule of :func:`moved`); None otherwise, or where a covariance is missing."""
+    """The shift ``d`` of the parameters both calibrations identify, taken together: ``d' S^-1 d`` with
+    ``S`` their shift's covariance (:func:`shift_covariance`), a chi-square with as many degrees of
+    freedom as parameters. {'chi2', 'dof', 'level'} when it passes ``level``, the chi-square whose tail
+    is that of SHIFT_SIGMAS for one parameter (for one the rule of :func:`moved`); None otherwise, or
+    where a covariance is missing."""
     pairs = _both(first, last)
     if not pairs:
         return None
-    keys = [c["parameter"] for _, c in pairs]
-    c1, c2 = fit_first.covariance(keys), fit_last.covariance(keys)
-    if c1 is None or c2 is None:
+    cov = shift_covariance(first, last, fit_first, fit_last)
+    if cov is None:
         return None
     d = np.array([float(c["value"]) - float(e["value"]) for e, c in pairs])
     try:
-        q = float(d @ np.linalg.solve(c1 + c2, d))
+        q = float(d @ np.linalg.solve(cov, d))
     except np.linalg.LinAlgError:
         return None
-    level = oe.sigma_level(SHIFT_SIGMAS, len(keys))
+    level = oe.sigma_level(SHIFT_SIGMAS, len(pairs))
     if not (math.isfinite(q) and q > level):
         return None
-    return {"chi2": round(q, 2), "dof": len(keys), "level": round(level, 2)}
+    return {"chi2": round(q, 2), "dof": len(pairs), "level": round(level, 2)}
+
+
+def shift_covariance(first: list[dict], last: list[dict], fit_first: oe.FitResult,
+                     fit_last: oe.FitResult) -> np.ndarray | None:
+    """The covariance of the later calibration's values less the early one's, for the parameters both
+    identify (:func:`_both`, in its order): the two fits' covariances added (parts of the record that
+    share no sample), the early one's conditional on the parameters the later calibration held where
+    the early one put them (:func:`held_later`). A flow gain and a load that the early part fixes
+    mostly as a ratio are each uncertain alone; the later part, calibrated with the load held, compares
+    its flow gain with the early flow gain at that load, whose uncertainty is that across the ratio.
+    None where a covariance is missing."""
+    keys = [c["parameter"] for _, c in _both(first, last)]
+    if not keys:
+        return None
+    c1 = fit_first.covariance(keys, held_later(first, last, fit_first, fit_last))
+    c2 = fit_last.covariance(keys)
+    return None if c1 is None or c2 is None else c1 + c2
+
+
+def held_later(first: list[dict], last: list[dict], fit_first: oe.FitResult, fit_last: oe.FitResult) -> list[str]:
+    """The parameters the early calibration fitted and the later one held at the early value (its
+    ``changes`` rows say the same value); one the later calibration set elsewhere (back to the spec's)
+    is not among them."""
+    later_free = {fp.key for fp in fit_last.free}
+    early = {c["parameter"]: float(c["value"]) for c in first}
+    later = {c["parameter"]: float(c["value"]) for c in last}
+    return [fp.key for fp in fit_first.free if fp.key not in later_free and fp.key in early and fp.key in later
+            and math.isclose(early[fp.key], later[fp.key], rel_tol=1e-9, abs_tol=0.0)]
 
 
 def cause(found: dict) -> str:
