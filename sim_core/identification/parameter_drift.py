@@ -152,7 +152,8 @@ def moved(first: list[dict], last: list[dict], sigmas: float = SHIFT_SIGMAS,
     cov = shift_covariance(first, last, *fits) if fits is not None else None
     out = []
     for i, (e, c) in enumerate(pairs):
-        sigma = math.sqrt(max(float(cov[i, i]), 0.0)) if cov is not None else math.hypot(float(c["sigma"]), float(e["sigma"]))
+        sigma = (math.sqrt(max(float(cov[i, i]), 0.0)) if cov is not None
+                 else math.hypot(float(c["sigma"]), float(e["sigma"])))
         shift = float(c["value"]) - float(e["value"])
         if sigma > 0 and abs(shift) > sigmas * sigma:
             out.append({"parameter": c["parameter"], "first": float(e["value"]), "last": float(c["value"]),
