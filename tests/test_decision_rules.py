@@ -554,9 +554,10 @@ def test_below_the_floor_only_a_candidate_that_explains_the_record_by_every_othe
     assert not ev.accepted_ok and ev.explains_record is None
 
 
-def explaining_forward(misfit=True, score=97.8, explains=lambda e: True):
+def explaining_forward(misfit=True, score=97.8, explains=lambda e: True, position_noises=None):
     """forward() where no single passes the floor, A gains 1.99 (its model passes the residual tests
-    per ``explains``), and any pair would pass."""
+    per ``explains``), and any pair would pass. ``position_noises``: the baseline's position misfit
+    in noises (the model with A: none)."""
     asked = []
 
     def evaluate_round(pool, model, accepted, r):
@@ -569,7 +570,8 @@ def explaining_forward(misfit=True, score=97.8, explains=lambda e: True):
     fw = dc.forward([A, B, C], frozenset(), evaluate_round=evaluate_round,
                     extend=lambda m, ev: m | {c.label for c in getattr(ev.candidate, "members", [ev.candidate])},
                     score=lambda m: score if not m else 99.9, ceiling=100.0, evaluate_pairs=evaluate_pairs,
-                    misfit=lambda m: misfit, explains=explains)
+                    misfit=lambda m: misfit, explains=explains,
+                    position_noises=None if position_noises is None else (lambda m: 0.0 if m else position_noises))
     return fw, asked
 
 
@@ -587,6 +589,33 @@ def test_forward_below_the_floor_names_nothing_where_the_record_is_not_missed_or
     assert fw.accepted == [] and asked == []
     fw, asked = explaining_forward(explains=lambda e: False)  # no single explains it: the pairs are tried
     assert asked == [3] and len(fw.accepted) == 2 and fw.accepted[0].pair is not None
+
+
+def test_below_the_floor_a_position_missed_by_noises_counts_where_the_points_are_few():
+    """1.5 points under the ceiling is within the floor, but on a large motion with a fine sensor it
+    is 5 noises of the position reading: a candidate that closes it and whitens the residual is named
+    (a sensor offset of 13 mrad on HydroLek's shoulder, gaining 1.19 points). Two noises or less, or a
+    white residual, and nothing is; no pair is tried on the noises alone."""
+    fw, asked = explaining_forward(score=98.5, position_noises=5.0)
+    assert [e.candidate.label for e in fw.accepted] == [A.label] and asked == []
+    assert "a misfit of 5.0 noises" in fw.accepted[0].explains_record
+    for noises, misfit in ((dc.FAR_NOISE, True), (1.0, True), (5.0, False)):
+        fw, asked = explaining_forward(score=98.5, position_noises=noises, misfit=misfit)
+        assert fw.accepted == [] and asked == []
+    fw, asked = explaining_forward(score=98.5, position_noises=5.0, explains=lambda e: False)
+    assert fw.accepted == [] and asked == []
+
+
+def test_the_position_misfit_is_judged_on_the_position_channels_in_noises():
+    """(100 - fit) / (100 - ceiling) is the residual over the noise: 3.0 / 0.6 = 5, a misfit of
+    sqrt(24) noises. The velocity and chamber pressures do not count, however many noises off; a
+    joint without ceilings neither."""
+    fits = {"j2": {"angle": 97.0, "velocity": 80.0, "pressure": 90.0, "score": 89.0}, "j1": {"angle": 10.0}}
+    ceilings = {"j2": {"angle": 99.4, "velocity": 95.0, "pressure": 99.99}}
+    assert dc.position_misfit(fits, ceilings) == pytest.approx(math.sqrt(24.0))
+    fits["j2"]["restarted"], ceilings["j2"]["restarted"] = 94.0, 99.0
+    assert dc.position_misfit(fits, ceilings) == pytest.approx(math.sqrt(35.0))
+    assert dc.position_misfit({"j2": {"velocity": 50.0, "pressure": 50.0}}, ceilings) == 0.0
 
 
 # ---- a named effect's parameters ----------------------------------------------------------------------

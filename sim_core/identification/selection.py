@@ -42,7 +42,7 @@ from . import step_timing
 from .candidates import Candidate, Pair
 from .decision import (AMBIGUITY, MAX_EFFECTS, MAX_PAIRS, NOISE_FACTOR, SIGNIFICANCE, THRESHOLD_POINTS, Evaluation,
                        backward as _backward, exchange, forward, judge, mean_score, member_evaluations, misses_record,
-                       pairs_after_a_drop, restart, score_over, simpler_parameters, stand_in)
+                       pairs_after_a_drop, position_misfit, restart, score_over, simpler_parameters, stand_in)
 from .metrics import savgol_window
 from .parameters import FreeParameter, declared, free_parameter
 from .progress import RoundProgress
@@ -499,7 +499,7 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
                        score=base.score, ceiling=ceiling, max_effects=max_effects, log=log,
                        evaluate_pairs=None if misfit is None else evaluate_pairs, misfit=model_misfit, first=first,
                        explains=None if misfit is None else explains, short_of_ceiling=short_of_ceiling,
-                       gap_on=gap_on)
+                       gap_on=gap_on, position_noises=lambda m: position_misfit(base.fits(m), ceilings))
 
     try:
         to_start = snapshot()
