@@ -114,6 +114,21 @@ def test_a_true_coulomb_friction_on_the_same_input_is_named(cli, tmp_path):
     assert s["effect"] == "coulomb_friction" and s["params"]["torque"] == pytest.approx(COULOMB_NM, rel=0.1)
 
 
+def _shoulder_diagnosis(cli, tmp_path, effect: str, noise_rad: float, *options) -> dict:
+    """diagnosis.json of HydroLek's shoulder under the PRBS of seed 100 (30 s, 200 Hz), the truth a
+    few percent off the nominal model (the scored matrix's draw for that seed), ``effect`` hidden in
+    it and ``noise_rad`` of angle noise; the whole bank searched (which effects are searched sets
+    what the baseline calibrates)."""
+    inp, meas = tmp_path / "in.csv", tmp_path / "measured.csv"
+    cli("excite", "--robot", "hydrolek", "--joint", "j2", "--duration", 30, "--seed", 100, "--out", inp, check=True)
+    cli("simulate", "--robot", "hydrolek", "--input", inp, "--out", meas, "--noise-angle", noise_rad, "--seed", 100,
+        "--set", "joints.j2.valve.rated_flow=4.309687e-05", "--set", "joints.j2.spool.natural_frequency=15.14483",
+        "--set", "joints.j2.cylinder.viscous_friction=1436.659", "--effect", effect, check=True)
+    proc = cli("diagnose", "--robot", "hydrolek", meas, "--report", tmp_path / "rep", "--quiet", *options)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+
+
 def test_a_misfit_just_over_the_floor_that_a_candidate_removes_is_named_not_unexplained(cli, tmp_path):
     """A small leak on the shoulder (6.5e-14 m^3/(s Pa), the nominal model a few percent off): the
     calibrated baseline sits 2.2 points under its noise ceiling with failing residual tests, a misfit
@@ -121,16 +136,8 @@ def test_a_misfit_just_over_the_floor_that_a_candidate_removes_is_named_not_unex
     below-the-floor rule (decision.best_explaining) no candidate passed the 2-point floor and the
     verdict said the bank had nothing for it (unexplained_discrepancy); the leak is named now. The whole
     bank is searched: which effects are searched sets what the baseline calibrates."""
-    inp, meas = tmp_path / "in.csv", tmp_path / "measured.csv"
-    cli("excite", "--robot", "hydrolek", "--joint", "j2", "--duration", 30, "--seed", 100, "--out", inp, check=True)
     leak = 6.481666406544826e-14
-    cli("simulate", "--robot", "hydrolek", "--input", inp, "--out", meas, "--noise-angle", 8.267382e-4, "--seed", 100,
-        "--set", "joints.j2.valve.rated_flow=4.309687e-05", "--set", "joints.j2.spool.natural_frequency=15.14483",
-        "--set", "joints.j2.cylinder.viscous_friction=1436.659",
-        "--effect", f"leakage:joint=j2,internal={leak!r},external=0.0", check=True)
-    proc = cli("diagnose", "--robot", "hydrolek", meas, "--report", tmp_path / "rep", "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    d = _shoulder_diagnosis(cli, tmp_path, f"leakage:joint=j2,internal={leak!r},external=0.0", 8.267382e-4)
     assert d["verdict"] == "discrepancy", (d["verdict"], d.get("unexplained"), d["decision"]["stopped"])
     assert [s["effect"] for s in d["selected"]] == ["leakage"], d["selected"]
     named = d["selected"][0]
@@ -147,17 +154,9 @@ def test_an_offset_a_few_noises_of_the_position_is_named_where_its_points_are_un
     but its angle misses the reading by 5 noises beyond the noise with failing residual tests, and
     the offset's candidate closes that. It is named below the floor by the position's noises
     (decision.position_misfit); without that the verdict was no_significant_discrepancy."""
-    inp, meas = tmp_path / "in.csv", tmp_path / "measured.csv"
-    cli("excite", "--robot", "hydrolek", "--joint", "j2", "--duration", 30, "--seed", 100, "--out", inp, check=True)
     offset = -0.012914949338162635
-    cli("simulate", "--robot", "hydrolek", "--input", inp, "--out", meas, "--noise-angle", 8.859711e-4, "--seed", 100,
-        "--set", "joints.j2.valve.rated_flow=4.309687e-05", "--set", "joints.j2.spool.natural_frequency=15.14483",
-        "--set", "joints.j2.cylinder.viscous_friction=1436.659",
-        "--effect", f"sensor_offset:joint=j2,offset={offset!r}", check=True)
-    proc = cli("diagnose", "--robot", "hydrolek", meas, "--report", tmp_path / "rep", "--quiet",
-               "--initial-pose", "spec")
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads((tmp_path / "rep" / "diagnosis.json").read_text())
+    d = _shoulder_diagnosis(cli, tmp_path, f"sensor_offset:joint=j2,offset={offset!r}", 8.859711e-4,
+                            "--initial-pose", "spec")
     assert d["verdict"] == "discrepancy", (d["verdict"], d.get("unexplained"), d["decision"]["stopped"])
     assert [s["effect"] for s in d["selected"]] == ["sensor_offset"], d["selected"]
     named = d["selected"][0]
