@@ -407,11 +407,12 @@ def forward(cands: list[Candidate], model, *, evaluate_round: Callable, extend: 
         if best is None:
             # the model misses the record: far from its noise ceiling, the residual tests failing
             s = score(model)
-            missed = not near(model, s) and (misfit is None or misfit(model))
-            noises = None
-            if not missed and position_noises is not None and misfit is not None:
-                noises = position_noises(model)
-                noises = noises if noises > FAR_NOISE and misfit(model) else None
+            close = near(model, s)
+            missed = not close and (misfit is None or misfit(model))
+            # within the floor in points, the position reading may still be missed by many noises
+            noises = position_noises(model) if close and position_noises is not None and misfit is not None else None
+            if noises is not None and not (noises > FAR_NOISE and misfit(model)):
+                noises = None
             if explains is not None and misfit is not None and (missed or noises is not None):
                 best = best_explaining(evals, s, ceiling, explains,
                                        None if gap_on is None else (lambda e, m=model: gap_on(m, e)), noises)
