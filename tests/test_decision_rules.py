@@ -761,10 +761,11 @@ ASYM, OFFSET, SAT, LAG, HYST = (cand("valve_asymmetry"), cand("valve_offset"), c
                                 cand("spool_lag"), cand("hysteresis"))
 
 
-def exchange_case(offset_gain, offset_spread=0.01, full=98.0, accepted=lambda r1, r2: [r1[0], r2[0]], scale=None):
+def exchange_case(offset_gain, offset_spread=0.01, full=98.0, accepted=lambda r1, r2: [r1[0], r2[0]], scale=None,
+                  dropped=lambda r1, r2: []):
     """Round 1 named a valve asymmetry over a null offset, round 2 a hysteresis; the offset refitted in
     the asymmetry's place (the hysteresis in the model) gains ``offset_gain`` on the model without it
-    (score 80)."""
+    (score 80). ``dropped``: what the backward pass removed of those named."""
     r1 = [judged(scored(ASYM, gain=13.5)), judged(scored(OFFSET, gain=6.2)), judged(scored(SAT, gain=3.0)),
           judged(scored(LAG, gain=-1.0))]
     r2 = [judged(scored(HYST, gain=6.6)), judged(scored(OFFSET, gain=0.0))]
@@ -785,7 +786,8 @@ def exchange_case(offset_gain, offset_spread=0.01, full=98.0, accepted=lambda r1
 
     out = dc.exchange(accepted, [r1, r2], "model", full, refit_without=refit_without, evaluate=evaluate,
                       score_with=lambda ev: ev.base_score + ev.gain,
-                      replace=lambda minus, ev: (minus, ev.candidate.label), score=lambda m: 99.0, scale=scale)
+                      replace=lambda minus, ev: (minus, ev.candidate.label), score=lambda m: 99.0, scale=scale,
+                      dropped=dropped(r1, r2))
     return out, calls, r1, r2
 
 
@@ -820,6 +822,38 @@ def test_exchange_leaves_pairs_named_together_and_effects_without_rivals():
     (model, kept, tried), calls, r1, r2 = exchange_case(
         offset_gain=19.0, accepted=lambda r1, r2: [r1[0], r1[1], r1[2], r2[0]])
     assert tried == [] and calls == [] and kept == [r1[0], r1[1], r1[2], r2[0]]
+
+
+def test_an_effect_named_beside_one_the_backward_pass_dropped_meets_the_rivals_of_that_round():
+    """The asymmetry of round 1 dropped, the hysteresis of round 2 left alone: it was chosen beside the
+    asymmetry, so it is refitted against round 1's best rivals (its own round has none with a positive
+    gain), the dropped asymmetry never among them, although it is the last effect named."""
+    (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=19.0, accepted=lambda r1, r2: [r2[0]],
+                                                        dropped=lambda r1, r2: [r1[0]])
+    assert calls == [("without", HYST.label, []), ("fit", [OFFSET.label, SAT.label], "model without " + HYST.label, 3)]
+    assert [e.candidate.label for e in kept] == [OFFSET.label] and model == ("model without " + HYST.label, OFFSET.label)
+    assert all(e.in_place_of is r2[0] for e in tried[0]) and any("exchanged for" in r for r in r2[0].reasons)
+    # a rival must still win by the margin: +0.4 against 0.5
+    (model, kept, _), _, r1, r2 = exchange_case(offset_gain=18.4, accepted=lambda r1, r2: [r2[0]],
+                                                dropped=lambda r1, r2: [r1[0]])
+    assert kept == [r2[0]] and model == "model"
+    # nothing dropped, or dropped after it was named: the last effect's round saw every other
+    for dropped in (lambda r1, r2: [], lambda r1, r2: [r2[0]]):
+        (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=19.0, accepted=lambda r1, r2: [r1[0]]
+                                                            if dropped(r1, r2) else [r2[0]], dropped=dropped)
+        assert tried == [] and calls == [] and model == "model"
+
+
+def test_an_effect_the_backward_pass_dropped_is_no_rival_in_any_round():
+    """Round 1's two strongest are the dropped asymmetry and the offset: the asymmetry is not refitted
+    in the place of the effect named beside it; its own round's best rival is fitted with round 1's."""
+    (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=1.5, accepted=lambda r1, r2: [r1[2], r2[0]],
+                                                        dropped=lambda r1, r2: [r1[0]])
+    fitted = [c for c in calls if c[0] == "fit"]
+    # the saturation (named in round 1) has no rival left but the offset; the hysteresis meets the offset
+    # of round 1 too (its own round's offset gained nothing); the offset passes neither time
+    assert [c[1] for c in fitted] == [[OFFSET.label], [OFFSET.label]]
+    assert kept == [r1[2], r2[0]] and model == "model"
 
 
 # ---- stand-ins ----------------------------------------------------------------------------------------

@@ -550,22 +550,28 @@ def pairs_after_a_drop(kept: list[Evaluation], dropped: list[Evaluation], fw: Fo
 
 # ---- exchange pass ---------------------------------------------------------------------------------------
 def exchange_rivals(ev: Evaluation, round_evals: list[Evaluation], accepted: list[Evaluation],
-                    k: int = EXCHANGE_RIVALS) -> list[Evaluation]:
+                    k: int = EXCHANGE_RIVALS, dropped: list[Evaluation] = ()) -> list[Evaluation]:
     """The ``k`` candidates of ``ev``'s round with the largest positive gains, other than the effects
-    already named."""
-    taken = {e.key for e in accepted}
+    already named and those the backward pass ``dropped`` (judged already beside the ones named)."""
+    taken = {e.key for e in accepted} | {e.key for e in dropped}
     rivals = [e for e in round_evals if e.key not in taken and math.isfinite(e.gain) and e.gain > 0]
     return sorted(rivals, key=lambda e: -e.gain)[:k]
 
 
 def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, full: float, *,
              refit_without: Callable, evaluate: Callable, score_with: Callable, replace: Callable, score: Callable,
-             log=None, scale: Callable | None = None):
+             log=None, scale: Callable | None = None, dropped: list[Evaluation] = ()):
     """Refit each effect named before the last against its round's strongest rivals, with the effects
     named after it in the model: greedy selection takes a round's best single with what the model held
     then, and an effect named later can make a rival the better explanation (a valve asymmetry stands
     for a null offset until the hysteresis beside it is named). The last effect's round already saw
     every other; a pair named together goes as found.
+
+    ``dropped``: the effects the backward pass removed. An effect named in a round after one of those
+    was chosen beside it, in a model that no longer holds it (a softened oil named first on a
+    closed-loop record, a spool lag beside it, the oil dropped): it is tried too, last or not, against
+    the strongest rivals of the round that named the earliest of them as well as its own (there the
+    model held what it holds now), a dropped effect never among them.
 
     ``refit_without(model, ev, rest)`` -> (the model without ``ev``, the rest refitted; its score);
     ``evaluate(candidates, model, rest, round)`` -> their judged Evaluations fitted on that model;
@@ -580,10 +586,16 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
     log = log or (lambda msg: None)
     accepted = list(accepted)
     tried: list[list[Evaluation]] = []
-    for ev in list(accepted[:-1]):
-        if ev.pair is not None:
+    last = accepted[-1] if accepted else None
+    for ev in list(accepted):
+        stale = [e.round for e in dropped if e.round < ev.round]
+        if ev.pair is not None or (ev is last and not stale):
             continue
-        rivals = exchange_rivals(ev, rounds[ev.round - 1], accepted)
+        rivals = exchange_rivals(ev, rounds[ev.round - 1], accepted, dropped=dropped)
+        if stale:
+            keys = {e.key for e in rivals}
+            rivals += [e for e in exchange_rivals(ev, rounds[min(stale) - 1], accepted, dropped=dropped)
+                       if e.key not in keys]
         if not rivals:
             continue
         rest = [e for e in accepted if e is not ev]

@@ -528,16 +528,19 @@ def select(st: Setting, cands: list[Candidate], base_spec, *, workers: int = 0, 
             joints = list(dict.fromkeys(acts_on(ev) + acts_on(rival)))
             return score_over(base.fits(model), joints), score_over(rival.fits, joints)
 
+        named = list(accepted)
         model, accepted = _backward(accepted, model, base.score(model), refit_without, log,
                                     misses=None if misfit is None else misses, score_on=score_on)
-        if len(accepted) >= 2:
+        dropped = [e for e in named if not any(e is a for a in accepted)]
+        if len(accepted) >= 2 or (accepted and dropped):
             before = list(accepted)
             model, accepted, tried = exchange(
                 accepted, rounds, model, base.score(model), refit_without=refit_without,
                 evaluate=lambda pool, minus, rest, r: evaluate_round(
                     pool, minus, [(e.candidate, e.effect_params()) for e in rest], r),
                 score_with=lambda ev: mean_score(ev.fits),
-                replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log, scale=scale)
+                replace=lambda minus, ev: _extend(minus, ev, recalibrate), score=base.score, log=log, scale=scale,
+                dropped=dropped)
             rounds += tried
             swaps = [(old, new) for old, new in zip(before, accepted) if old is not new]
             if swaps:
