@@ -838,9 +838,9 @@ def test_an_effect_named_beside_one_the_backward_pass_dropped_meets_the_rivals_o
                                                 dropped=lambda r1, r2: [r1[0]])
     assert kept == [r2[0]] and model == "model"
     # nothing dropped, or dropped after it was named: the last effect's round saw every other
-    for dropped in (lambda r1, r2: [], lambda r1, r2: [r2[0]]):
-        (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=19.0, accepted=lambda r1, r2: [r1[0]]
-                                                            if dropped(r1, r2) else [r2[0]], dropped=dropped)
+    for accepted, dropped in ((lambda r1, r2: [r2[0]], lambda r1, r2: []),
+                              (lambda r1, r2: [r1[0]], lambda r1, r2: [r2[0]])):
+        (model, kept, tried), calls, r1, r2 = exchange_case(offset_gain=19.0, accepted=accepted, dropped=dropped)
         assert tried == [] and calls == [] and model == "model"
 
 

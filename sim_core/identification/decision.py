@@ -588,13 +588,14 @@ def exchange(accepted: list[Evaluation], rounds: list[list[Evaluation]], model, 
     tried: list[list[Evaluation]] = []
     last = accepted[-1] if accepted else None
     for ev in list(accepted):
-        stale = [e.round for e in dropped if e.round < ev.round]
+        # the round of the earliest effect dropped before ``ev`` was named (0: none)
+        stale = min((e.round for e in dropped if e.round < ev.round), default=0)
         if ev.pair is not None or (ev is last and not stale):
             continue
         rivals = exchange_rivals(ev, rounds[ev.round - 1], accepted, dropped=dropped)
         if stale:
             keys = {e.key for e in rivals}
-            rivals += [e for e in exchange_rivals(ev, rounds[min(stale) - 1], accepted, dropped=dropped)
+            rivals += [e for e in exchange_rivals(ev, rounds[stale - 1], accepted, dropped=dropped)
                        if e.key not in keys]
         if not rivals:
             continue
