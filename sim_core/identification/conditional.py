@@ -12,14 +12,14 @@ says how far a value hangs on each held one; a user who reads the held value off
 correct the value without refitting: ``v * (h_true / h_nominal) ** elasticity``.
 
 The first order is checked against the model before it is reported, as a trust region checks a
-Gauss-Newton step: the fitted values moved as it says for the held parameter 10 % either side must
-buy at least a quarter of the cost reduction it predicts. Where the fitted parameters have a
-direction the record hardly fixes (a backlash's width beside the flow gain and the sensor's gain on
-a closed-loop cylinder), the least-squares solution sends them far along it on a sliver of the held
-parameter's residual, out of their ranges, where the model does not follow; a refit with the held
-value changed does not go there. Then the directions are taken in order of how well the record fixes
-them and the most the model confirms are kept (a truncated pseudo-inverse; none: the value does not
-depend on the held parameter in any way the model confirms).
+Gauss-Newton step, one direction of the fit at a time: the directions in order of how well the
+record fixes them, each kept while moving the fitted values along it (with the held parameter 10 %
+either side) buys at least a quarter of the cost fall the linear model predicts for it. Where the
+fitted parameters have a direction the record hardly fixes (a backlash's width beside the flow gain
+and the sensor's gain on a closed-loop cylinder), the least-squares solution sends them along it on
+a sliver of the held parameter's residual, where the model does not follow and a refit with the held
+value changed does not go (a truncated pseudo-inverse; none kept: the value does not depend on the
+held parameter in any way the model confirms).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .output_error import FitResult, _simulate_all, _spec_at
+from .output_error import UNCERTAINTY_STEP, FitResult, _simulate_all, _spec_at
 from .parameters import FreeParameter
 
 # a value that moves by less than 0.2 % per percent of a held parameter does not depend on it for
@@ -74,55 +74,58 @@ def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, sid
 
 
 def confirmed(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], runner, problem, side=None) -> np.ndarray:
-    """dx_f / dlog(h) per held parameter (columns of ``J_h``): the least-squares solution where the
-    model confirms it at the held value ``CHECK_REL`` either side (:func:`_ratios`), else the solution
-    on the best-fixed directions of ``fit``'s Jacobian that the model confirms, the most of them."""
+    """dx_f / dlog(h) per held parameter (columns of ``J_h``): the least-squares solution taken one
+    direction of ``fit``'s Jacobian at a time, the best fixed first, as far as the model confirms each.
+
+    With the held value ``CHECK_REL`` either side, the fitted values are moved by the solution on the
+    first k directions, k = 0 .. n, each simulated (:func:`_costs`). Direction k is kept when the
+    move along it buys at least ``ACCEPT_RATIO`` of the cost fall the linear model predicts for it (a
+    trust region's test, one direction at a time); the first one the model contradicts ends the
+    solution there. A direction whose move stays within the Jacobian's own step is kept untested: it
+    changes nothing the model could confirm."""
     U, sv, Vt = np.linalg.svd(fit.jacobian, full_matrices=False)
     usable = sv > sv[0] * max(fit.jacobian.shape) * np.finfo(float).eps if sv.size and sv[0] > 0 else sv > 0
-    coef = np.where(usable[:, None], (U.T @ J_h) / np.where(usable, sv, 1.0)[:, None], 0.0)
+    n = int(usable.sum())
+    coef = (U[:, :n].T @ J_h) / sv[:n, None]        # per direction and held parameter, per unit log(h)
 
-    def move(k: int, j: int) -> np.ndarray:          # the top-k directions' solution for held parameter j
+    def move(k: int, j: int) -> np.ndarray:          # the first k directions' solution for held parameter j
         return -(Vt[:k].T @ coef[:k, j])
 
-    n = int(usable.sum())
-    S = np.column_stack([move(n, j) for j in range(len(held))])
-    todo = [j for j, ok in enumerate(_ratios(fit, J_h, held, [(j, S[:, j]) for j in range(len(held))],
-                                             runner, problem, side)) if not ok]
-    if todo:
-        tries = [(j, k) for j in todo for k in range(n - 1, 0, -1)]
-        oks = _ratios(fit, J_h, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)
-        for j in todo:
-            S[:, j] = next((move(k, j) for (jj, k), ok in zip(tries, oks) if jj == j and ok), 0.0)
+    tries = [(j, k) for j in range(len(held)) for k in range(n + 1)]
+    costs = dict(zip(tries, _costs(fit, J_h, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)))
+    reach = abs(math.log1p(-CHECK_REL))
+    S = np.zeros((fit.x.size, len(held)))
+    for j in range(len(held)):
+        kept = 0
+        for k in range(1, n + 1):
+            (pred0, act0), (pred1, act1) = costs[(j, k - 1)], costs[(j, k)]
+            small = abs(coef[k - 1, j]) * reach < UNCERTAINTY_STEP
+            if not (small or (pred0 - pred1 > 0.0 and act0 - act1 >= ACCEPT_RATIO * (pred0 - pred1))):
+                break
+            kept = k
+        S[:, j] = move(kept, j)
     return S
 
 
-def _ratios(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]],
-            runner, problem, side=None) -> list[bool]:
-    """Per (held index j, move dx/dlog h_j): whether the model confirms it. The fitted values moved by
-    it (within their ranges) with h_j at (1 +- CHECK_REL) of its value, both simulated: the cost must
-    fall by at least ACCEPT_RATIO of what the linear model predicts from the unmoved values at that
-    h_j (which it must predict to fall)."""
+def _costs(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]],
+           runner, problem, side=None) -> list[tuple[float, float]]:
+    """Per (held index j, move dx/dlog h_j): (predicted, simulated) cost of the fitted values moved by
+    it (within their ranges) with h_j at (1 +- CHECK_REL) of its value, the two sides summed; predicted
+    by the linear model from ``fit``'s residual and Jacobians."""
     x, r0, J_f = fit.x, fit.residual, fit.jacobian
     steps = (math.log1p(CHECK_REL), math.log1p(-CHECK_REL))
-    specs, plan = [], []
+    specs, predicted = [], []
     for j, dx in moves:
         for d in steps:
             xp = np.clip(x + dx * d, 0.0, 1.0)
             s = _spec_at(fit.spec, fit.free, xp)
             held[j].apply(s, held[j].get(fit.spec) * math.exp(d))
             specs.append(s)
-            unmoved = r0 + J_h[:, j] * d
-            plan.append((float(unmoved @ unmoved), float(np.sum((unmoved + J_f @ (xp - x)) ** 2))))
+            predicted.append(float(np.sum((r0 + J_h[:, j] * d + J_f @ (xp - x)) ** 2)))
     fit.sims += len(specs)
     outs = _simulate_all(runner, specs, problem.n, side)
-    out = []
-    for i in range(len(moves)):
-        pair = range(2 * i, 2 * i + 2)
-        before = sum(plan[m][0] for m in pair)
-        predicted = before - sum(plan[m][1] for m in pair)
-        costs = [float(np.sum(problem.residuals(outs[m]) ** 2)) if outs[m].ok else math.inf for m in pair]
-        out.append(predicted > 0.0 and before - sum(costs) >= ACCEPT_RATIO * predicted)
-    return out
+    simulated = [float(np.sum(problem.residuals(o) ** 2)) if o.ok else math.inf for o in outs]
+    return [(predicted[2 * i] + predicted[2 * i + 1], simulated[2 * i] + simulated[2 * i + 1]) for i in range(len(moves))]
 
 
 def corrected(value: float, elasticity: dict[str, float], true_over_nominal: dict[str, float]) -> float:
