@@ -114,35 +114,41 @@ def test_a_short_delay_is_named_once_the_oil_named_before_it_is_dropped(cli, tmp
     assert "named in place of" in d["decision"]["stopped"], d["decision"]["stopped"]
 
 
-def test_what_a_value_takes_from_the_held_supply_agrees_with_diagnosing_again_at_the_gauged_supply(cli, tmp_path):
-    """A 10 mm backlash on the cylinder (the matrix's held-out draw, seed 200), the rig's supply 10 % under
+@pytest.mark.parametrize("seed, width", [(200, 0.00995), (202, 0.01417)])
+def test_what_a_value_takes_from_the_held_supply_agrees_with_diagnosing_again_at_the_gauged_supply(cli, tmp_path, seed,
+                                                                                                    width):
+    """A 10 or 14 mm backlash on the cylinder (the matrix's held-out draws), the rig's supply 10 % under
     its spec and held there. The report says how far each value hangs on that supply; a user who reads
     the gauge later corrects the values with it. Diagnosed again with the gauged supply in the spec,
     the values must be where the correction puts them: the width not at all (it is a length the record
-    shows), the calibrated flow gain about as the orifice law's square root of the pressure. Until
-    the first order was checked against the model, the width was said to go as the supply to the
-    power -5 (70 % off at the gauge's value), the flow gain -5.3: a direction the record hardly fixes
-    (width, flow gain, the sensor's gain and the seals' friction together) taken at face value."""
+    shows), the calibrated flow gain about as the orifice law's square root of the pressure, the load
+    as the pressure, the sensor's gain not at all. The least-squares first order sent a direction the
+    record hardly fixes (width, flow gain, the sensor's gain and the seals' friction together) far on a
+    sliver of the supply's residual: seed 200's width went as the supply to the power -5 (70 % off at
+    the gauge's value), and seed 202's passed a check of the whole move with the width at +0.54 and the
+    sensor's gain, not the flow gain, carrying the supply (-0.51); each direction is now confirmed
+    against the model on its own."""
     off = {"valve.rated_flow": 1.1, "supply.pressure": 0.9}
-    hidden = ("backlash", {"width": 0.01})
+    hidden = ("backlash", {"width": width})
     (tmp_path / "held").mkdir()
     (tmp_path / "gauged").mkdir()
-    j, held = _diagnose(cli, tmp_path / "held", "cylinder", hidden, seed=200, off_nominal=off)
-    _, gauged = _diagnose(cli, tmp_path / "gauged", "cylinder", hidden, seed=200, off_nominal=off,
+    j, held = _diagnose(cli, tmp_path / "held", "cylinder", hidden, seed=seed, off_nominal=off)
+    _, gauged = _diagnose(cli, tmp_path / "gauged", "cylinder", hidden, seed=seed, off_nominal=off,
                           measure=("supply.pressure",))
     assert [(s["effect"], s["joint"]) for s in held["selected"]] == [("backlash", j)] == \
         [(s["effect"], s["joint"]) for s in gauged["selected"]], (held["selected"], gauged["selected"])
     a, b = held["selected"][0], gauged["selected"][0]
     e_width = a.get("elasticity_to_held", {}).get("width", {}).get("supply.pressure", 0.0)
-    assert a["params"]["width"] * 0.9 ** e_width == pytest.approx(b["params"]["width"], rel=0.005), e_width
+    assert a["params"]["width"] * 0.9 ** e_width == pytest.approx(b["params"]["width"], rel=0.01), e_width
     rows, again = held["calibration"]["refitted_with_effects"], gauged["calibration"]["refitted_with_effects"]
     e_flow = rows[f"joints.{j}.valve.rated_flow"]["elasticity_to_held"]["supply.pressure"]
     assert -0.75 < e_flow < -0.4                      # Q ~ K sqrt(dp): the record fixes K sqrt(supply), the load aside
-    # the flow gain and the load (what the supply is most tied to); the seals' viscous friction, which the
-    # record fixes least, is not held to the first order's 10 % step
-    for key in (f"joints.{j}.valve.rated_flow", f"effects.payload.{j}.mass"):
-        e = rows[key]["elasticity_to_held"]["supply.pressure"]
-        assert rows[key]["value"] * 0.9 ** e == pytest.approx(again[key]["value"], rel=0.005), (key, e)
+    # the flow gain, the sensor's gain and the load; the seals' viscous friction, the direction the record
+    # fixes least, is not held to it (seed 202: +1.6 % per % where the second diagnosis says +1.28)
+    for key in (f"joints.{j}.valve.rated_flow", f"effects.sensor_gain.{j}.gain", f"effects.payload.{j}.mass"):
+        e = rows[key].get("elasticity_to_held", {}).get("supply.pressure", 0.0)
+        there = again[key]["value"] if key in again else gauged["calibration"]["values"][key]   # not refitted: held
+        assert rows[key]["value"] * 0.9 ** e == pytest.approx(there, rel=0.01), (key, e)
 
 
 @pytest.mark.parametrize("template", list(TEMPLATES))
