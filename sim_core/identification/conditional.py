@@ -11,15 +11,14 @@ included, moves with it). The elasticity, percent of the value per percent of th
 says how far a value hangs on each held one; a user who reads the held value off a gauge later can
 correct the value without refitting: ``v * (h_true / h_nominal) ** elasticity``.
 
-The first order is checked against the model before it is reported, as a trust region checks a
-Gauss-Newton step, one direction of the fit at a time: the directions in order of how well the
-record fixes them, each kept while moving the fitted values along it (with the held parameter 10 %
-either side) buys at least a quarter of the cost fall the linear model predicts for it. Where the
-fitted parameters have a direction the record hardly fixes (a backlash's width beside the flow gain
-and the sensor's gain on a closed-loop cylinder), the least-squares solution sends them along it on
-a sliver of the held parameter's residual, where the model does not follow and a refit with the held
-value changed does not go (a truncated pseudo-inverse; none kept: the value does not depend on the
-held parameter in any way the model confirms).
+The first order is checked against the model before it is reported. Where the fitted parameters
+have a direction the record hardly fixes (a backlash's width beside the flow gain and the sensor's
+gain on a closed-loop cylinder), the least-squares solution sends them along it on a sliver of the
+held parameter's residual, where the model does not follow and a refit with the held value changed
+does not go. So the solutions on the first k directions of the fit (in order of how well the record
+fixes them, k = 0 .. all) are each simulated with the held parameter 10 % either side, and the one
+the model fits best is reported: the whole solution where the first order holds (a truncated
+pseudo-inverse chosen by the model, as a line search chooses a step).
 """
 
 from __future__ import annotations
@@ -28,7 +27,7 @@ import math
 
 import numpy as np
 
-from .output_error import UNCERTAINTY_STEP, FitResult, _simulate_all, _spec_at
+from .output_error import FitResult, _simulate_all, _spec_at
 from .parameters import FreeParameter
 
 # a value that moves by less than 0.2 % per percent of a held parameter does not depend on it for
@@ -36,7 +35,6 @@ from .parameters import FreeParameter
 ELASTICITY_LIMIT = 0.2
 STEP_REL = 2e-3         # the held parameter's forward step, relative to its value
 CHECK_REL = 0.1         # the first order is checked at the held parameter 10 % either side (a gauge's correction)
-ACCEPT_RATIO = 0.25     # the share of its predicted cost reduction the model must confirm (a trust region's)
 MAX_LOG_FACTOR = 50.0   # span: a factor beyond e^50 on a value is taken as e^50 (the value's own range cuts it)
 
 
@@ -74,15 +72,11 @@ def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, sid
 
 
 def confirmed(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], runner, problem, side=None) -> np.ndarray:
-    """dx_f / dlog(h) per held parameter (columns of ``J_h``): the least-squares solution taken one
-    direction of ``fit``'s Jacobian at a time, the best fixed first, as far as the model confirms each.
-
-    With the held value ``CHECK_REL`` either side, the fitted values are moved by the solution on the
-    first k directions, k = 0 .. n, each simulated (:func:`_costs`). Direction k is kept when the
-    move along it buys at least ``ACCEPT_RATIO`` of the cost fall the linear model predicts for it (a
-    trust region's test, one direction at a time); the first one the model contradicts ends the
-    solution there. A direction whose move stays within the Jacobian's own step is kept untested: it
-    changes nothing the model could confirm."""
+    """dx_f / dlog(h) per held parameter (columns of ``J_h``): of the least-squares solutions on the first
+    k directions of ``fit``'s Jacobian (k = 0 .. n, the best fixed first; n: the whole solution), the one
+    the model fits best with the held value ``CHECK_REL`` either side (:func:`_costs`; a tie goes to the
+    larger k). Where the first order holds, that is the whole solution; where a direction the record
+    hardly fixes sends the values where the model does not follow, a solution without it."""
     U, sv, Vt = np.linalg.svd(fit.jacobian, full_matrices=False)
     usable = sv > sv[0] * max(fit.jacobian.shape) * np.finfo(float).eps if sv.size and sv[0] > 0 else sv > 0
     n = int(usable.sum())
@@ -92,40 +86,29 @@ def confirmed(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], runner
         return -(Vt[:k].T @ coef[:k, j])
 
     tries = [(j, k) for j in range(len(held)) for k in range(n + 1)]
-    costs = dict(zip(tries, _costs(fit, J_h, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)))
-    reach = abs(math.log1p(-CHECK_REL))
+    costs = _costs(fit, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)
     S = np.zeros((fit.x.size, len(held)))
     for j in range(len(held)):
-        kept = 0
-        for k in range(1, n + 1):
-            (pred0, act0), (pred1, act1) = costs[(j, k - 1)], costs[(j, k)]
-            small = abs(coef[k - 1, j]) * reach < UNCERTAINTY_STEP
-            if not (small or (pred0 - pred1 > 0.0 and act0 - act1 >= ACCEPT_RATIO * (pred0 - pred1))):
-                break
-            kept = k
-        S[:, j] = move(kept, j)
+        k = min(range(n + 1), key=lambda k: (costs[tries.index((j, k))], -k))
+        S[:, j] = move(k, j)
     return S
 
 
-def _costs(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]],
-           runner, problem, side=None) -> list[tuple[float, float]]:
-    """Per (held index j, move dx/dlog h_j): (predicted, simulated) cost of the fitted values moved by
-    it (within their ranges) with h_j at (1 +- CHECK_REL) of its value, the two sides summed; predicted
-    by the linear model from ``fit``'s residual and Jacobians."""
-    x, r0, J_f = fit.x, fit.residual, fit.jacobian
+def _costs(fit: FitResult, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]], runner, problem,
+           side=None) -> list[float]:
+    """Per (held index j, move dx/dlog h_j): the simulated cost of the fitted values moved by it (within
+    their ranges) with h_j at (1 +- CHECK_REL) of its value, the two sides summed."""
     steps = (math.log1p(CHECK_REL), math.log1p(-CHECK_REL))
-    specs, predicted = [], []
+    specs = []
     for j, dx in moves:
         for d in steps:
-            xp = np.clip(x + dx * d, 0.0, 1.0)
-            s = _spec_at(fit.spec, fit.free, xp)
+            s = _spec_at(fit.spec, fit.free, np.clip(fit.x + dx * d, 0.0, 1.0))
             held[j].apply(s, held[j].get(fit.spec) * math.exp(d))
             specs.append(s)
-            predicted.append(float(np.sum((r0 + J_h[:, j] * d + J_f @ (xp - x)) ** 2)))
     fit.sims += len(specs)
     outs = _simulate_all(runner, specs, problem.n, side)
     simulated = [float(np.sum(problem.residuals(o) ** 2)) if o.ok else math.inf for o in outs]
-    return [(predicted[2 * i] + predicted[2 * i + 1], simulated[2 * i] + simulated[2 * i + 1]) for i in range(len(moves))]
+    return [simulated[2 * i] + simulated[2 * i + 1] for i in range(len(moves))]
 
 
 def corrected(value: float, elasticity: dict[str, float], true_over_nominal: dict[str, float]) -> float:
