@@ -11,14 +11,15 @@ included, moves with it). The elasticity, percent of the value per percent of th
 says how far a value hangs on each held one; a user who reads the held value off a gauge later can
 correct the value without refitting: ``v * (h_true / h_nominal) ** elasticity``.
 
-The first order is checked against the model before it is reported. Where the fitted parameters
-have a direction the record hardly fixes (a backlash's width beside the flow gain and the sensor's
-gain on a closed-loop cylinder), the least-squares solution sends them along it on a sliver of the
-held parameter's residual, where the model does not follow and a refit with the held value changed
-does not go. So the solutions on the first k directions of the fit (in order of how well the record
-fixes them, k = 0 .. all) are each simulated with the held parameter 10 % either side, and the one
-the model fits best is reported: the whole solution where the first order holds (a truncated
-pseudo-inverse chosen by the model, as a line search chooses a step).
+The first order is checked against the model before it is reported, as a trust region checks a
+Gauss-Newton step: the fitted values moved as it says for the held parameter 10 % either side must
+buy at least a quarter of the cost reduction it predicts. Where the fitted parameters have a
+direction the record hardly fixes (a backlash's width beside the flow gain and the sensor's gain on
+a closed-loop cylinder), the least-squares solution sends them far along it on a sliver of the held
+parameter's residual, out of their ranges, where the model does not follow; a refit with the held
+value changed does not go there. Then the directions are taken in order of how well the record fixes
+them and the most the model confirms are kept (a truncated pseudo-inverse; none: the value does not
+depend on the held parameter in any way the model confirms).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from .parameters import FreeParameter
 ELASTICITY_LIMIT = 0.2
 STEP_REL = 2e-3         # the held parameter's forward step, relative to its value
 CHECK_REL = 0.1         # the first order is checked at the held parameter 10 % either side (a gauge's correction)
+ACCEPT_RATIO = 0.25     # the share of its predicted cost reduction the model must confirm (a trust region's)
 MAX_LOG_FACTOR = 50.0   # span: a factor beyond e^50 on a value is taken as e^50 (the value's own range cuts it)
 
 
@@ -72,43 +74,55 @@ def elasticities(fit: FitResult, held: list[FreeParameter], runner, problem, sid
 
 
 def confirmed(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], runner, problem, side=None) -> np.ndarray:
-    """dx_f / dlog(h) per held parameter (columns of ``J_h``): of the least-squares solutions on the first
-    k directions of ``fit``'s Jacobian (k = 0 .. n, the best fixed first; n: the whole solution), the one
-    the model fits best with the held value ``CHECK_REL`` either side (:func:`_costs`; a tie goes to the
-    larger k). Where the first order holds, that is the whole solution; where a direction the record
-    hardly fixes sends the values where the model does not follow, a solution without it."""
+    """dx_f / dlog(h) per held parameter (columns of ``J_h``): the least-squares solution where the
+    model confirms it at the held value ``CHECK_REL`` either side (:func:`_ratios`), else the solution
+    on the best-fixed directions of ``fit``'s Jacobian that the model confirms, the most of them."""
     U, sv, Vt = np.linalg.svd(fit.jacobian, full_matrices=False)
     usable = sv > sv[0] * max(fit.jacobian.shape) * np.finfo(float).eps if sv.size and sv[0] > 0 else sv > 0
-    n = int(usable.sum())
-    coef = (U[:, :n].T @ J_h) / sv[:n, None]        # per direction and held parameter, per unit log(h)
+    coef = np.where(usable[:, None], (U.T @ J_h) / np.where(usable, sv, 1.0)[:, None], 0.0)
 
-    def move(k: int, j: int) -> np.ndarray:          # the first k directions' solution for held parameter j
+    def move(k: int, j: int) -> np.ndarray:          # the top-k directions' solution for held parameter j
         return -(Vt[:k].T @ coef[:k, j])
 
-    tries = [(j, k) for j in range(len(held)) for k in range(n + 1)]
-    costs = _costs(fit, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)
-    S = np.zeros((fit.x.size, len(held)))
-    for j in range(len(held)):
-        k = min(range(n + 1), key=lambda k: (costs[tries.index((j, k))], -k))
-        S[:, j] = move(k, j)
+    n = int(usable.sum())
+    S = np.column_stack([move(n, j) for j in range(len(held))])
+    todo = [j for j, ok in enumerate(_ratios(fit, J_h, held, [(j, S[:, j]) for j in range(len(held))],
+                                             runner, problem, side)) if not ok]
+    if todo:
+        tries = [(j, k) for j in todo for k in range(n - 1, 0, -1)]
+        oks = _ratios(fit, J_h, held, [(j, move(k, j)) for j, k in tries], runner, problem, side)
+        for j in todo:
+            S[:, j] = next((move(k, j) for (jj, k), ok in zip(tries, oks) if jj == j and ok), 0.0)
     return S
 
 
-def _costs(fit: FitResult, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]], runner, problem,
-           side=None) -> list[float]:
-    """Per (held index j, move dx/dlog h_j): the simulated cost of the fitted values moved by it (within
-    their ranges) with h_j at (1 +- CHECK_REL) of its value, the two sides summed."""
+def _ratios(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], moves: list[tuple[int, np.ndarray]],
+            runner, problem, side=None) -> list[bool]:
+    """Per (held index j, move dx/dlog h_j): whether the model confirms it. The fitted values moved by
+    it (within their ranges) with h_j at (1 +- CHECK_REL) of its value, both simulated: the cost must
+    fall by at least ACCEPT_RATIO of what the linear model predicts from the unmoved values at that
+    h_j (which it must predict to fall)."""
+    x, r0, J_f = fit.x, fit.residual, fit.jacobian
     steps = (math.log1p(CHECK_REL), math.log1p(-CHECK_REL))
-    specs = []
+    specs, plan = [], []
     for j, dx in moves:
         for d in steps:
-            s = _spec_at(fit.spec, fit.free, np.clip(fit.x + dx * d, 0.0, 1.0))
+            xp = np.clip(x + dx * d, 0.0, 1.0)
+            s = _spec_at(fit.spec, fit.free, xp)
             held[j].apply(s, held[j].get(fit.spec) * math.exp(d))
             specs.append(s)
+            unmoved = r0 + J_h[:, j] * d
+            plan.append((float(unmoved @ unmoved), float(np.sum((unmoved + J_f @ (xp - x)) ** 2))))
     fit.sims += len(specs)
     outs = _simulate_all(runner, specs, problem.n, side)
-    simulated = [float(np.sum(problem.residuals(o) ** 2)) if o.ok else math.inf for o in outs]
-    return [simulated[2 * i] + simulated[2 * i + 1] for i in range(len(moves))]
+    out = []
+    for i in range(len(moves)):
+        pair = range(2 * i, 2 * i + 2)
+        before = sum(plan[m][0] for m in pair)
+        predicted = before - sum(plan[m][1] for m in pair)
+        costs = [float(np.sum(problem.residuals(outs[m]) ** 2)) if outs[m].ok else math.inf for m in pair]
+        out.append(predicted > 0.0 and before - sum(costs) >= ACCEPT_RATIO * predicted)
+    return out
 
 
 def corrected(value: float, elasticity: dict[str, float], true_over_nominal: dict[str, float]) -> float:

@@ -540,9 +540,6 @@ def sigma_level(sigmas: float, dof: int) -> float:
     return float(chi2.isf(2.0 * norm.sf(sigmas), dof))
 
 
-UNCERTAINTY_STEP = 1e-3    # the Jacobian step at the optimum, in the normalised coordinates (of the search range)
-
-
 def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
     """Forward-difference Jacobian at the optimum (steps of 1e-3 of the search range, pushed inward
     at the bounds; the columns side by side when ``side`` is given) and the covariance
@@ -554,7 +551,7 @@ def add_uncertainty(out: FitResult, runner, problem, side=None) -> None:
     J = np.zeros((r0.size, k))
     steps, specs = [], []
     for i in range(k):
-        h = UNCERTAINTY_STEP if x[i] + UNCERTAINTY_STEP <= 1.0 else -UNCERTAINTY_STEP
+        h = 1e-3 if x[i] + 1e-3 <= 1.0 else -1e-3
         xp = x.copy()
         xp[i] += h
         steps.append(h)
