@@ -78,13 +78,13 @@ def confirmed(fit: FitResult, J_h: np.ndarray, held: list[FreeParameter], runner
     model confirms it at the held value ``CHECK_REL`` either side (:func:`_ratios`), else the solution
     on the best-fixed directions of ``fit``'s Jacobian that the model confirms, the most of them."""
     U, sv, Vt = np.linalg.svd(fit.jacobian, full_matrices=False)
-    usable = sv > sv[0] * max(fit.jacobian.shape) * np.finfo(float).eps if sv.size and sv[0] > 0 else sv > 0
-    coef = np.where(usable[:, None], (U.T @ J_h) / np.where(usable, sv, 1.0)[:, None], 0.0)
+    # the directions lstsq's default cut-off keeps (singular values in descending order)
+    n = int(np.sum(sv > sv[0] * max(fit.jacobian.shape) * np.finfo(float).eps))
+    coef = (U[:, :n].T @ J_h) / sv[:n, None]        # per direction and held parameter, per unit log(h)
 
     def move(k: int, j: int) -> np.ndarray:          # the top-k directions' solution for held parameter j
         return -(Vt[:k].T @ coef[:k, j])
 
-    n = int(usable.sum())
     S = np.column_stack([move(n, j) for j in range(len(held))])
     todo = [j for j, ok in enumerate(_ratios(fit, J_h, held, [(j, S[:, j]) for j in range(len(held))],
                                              runner, problem, side)) if not ok]
