@@ -51,7 +51,7 @@ summary gives the share right among those whose effects show, beside the share o
 
 ``--seeds 6`` draws every single anew (sixths of each range, not thirds) and adds seeds 4-6 to the
 clean and out-of-bank records (the valve's flow exponents then in fifths of 0.6-0.7): a draw the
-decision's rules were not read on (README, "A draw the rules were not read on").
+decision's rules were not read on (docs/diagnosis-matrix.md, "A draw the rules were not read on").
 
 ``--templates boom,cylinder,rotary`` makes the rig's singles and clean records on each of those
 templates (``rig new``; the scored matrix's is the boom alone): a check on rigs the thresholds were

@@ -66,7 +66,7 @@ def _sized_leak(cli, tmp_path, template):
 POSITION_ONLY_TWINS = {"valve_asymmetry": "area_ratio"}
 # wrong at the tests' seed, kept visible (strict: the case fails the run once it is right); none now
 # (the boom's 60 ms delay, named an overdamped joint compliance until the calibration kept what the
-# record needs together: README, "Diagnose your own rig")
+# record needs together: docs/rig-diagnosis-rules.md)
 KNOWN_MISSES: dict[tuple[str, str], str] = {}
 
 

@@ -19,7 +19,7 @@ Not one at a time to the end: in a closed-loop record without pressures a parame
 apart (a flow gain and a supply pressure or a sensor gain); kept, it is then identified and carries
 what the two explain together, and the effects named afterwards inherit its error (measured on a
 hanging cylinder's 4 % leak, seeds 1-2: 22-23 % low with one-at-a-time elimination, 9 % low with
-this rule before the flow gain went last, 2-3 % since; README, "Diagnose your own rig").
+this rule before the flow gain went last, 2-3 % since; docs/rig-diagnosis-rules.md).
 
 Unless they matter together: parameters each under ``|value/sigma| = 3`` can still be what the
 record needs jointly (a supply pressure and a load mass of a cylinder without pressures: each
